@@ -1,0 +1,75 @@
+!> The one way a run stops on an error.
+!>
+!> `fatal_error` is for an error seen by one rank while others may be waiting
+!> in a collective: it prints on that rank and calls MPI_Abort, so no rank hangs.
+!> `collective_error` is for an error every rank knows about (for example after a
+!> broadcast of an input check): rank 0 prints, every rank finalizes MPI and the
+!> process exits with a non-zero status, without Open MPI's abort banner.
+module errors
+  use, intrinsic :: iso_fortran_env, only: error_unit, output_unit
+  use mpi_f08, only: MPI_Comm, MPI_COMM_WORLD, MPI_Abort, MPI_Comm_rank, MPI_Finalize, &
+                     MPI_Initialized, MPI_Finalized
+  implicit none
+  private
+
+  public :: fatal_error, collective_error, check_status
+
+  integer, parameter, public :: exit_input_error = 2    !< bad input
+  integer, parameter, public :: exit_not_converged = 3  !< a solver did not converge
+  integer, parameter, public :: exit_kkt_failed = 4     !< the KKT check failed
+  integer, parameter, public :: exit_internal = 5       !< anything else
+
+contains
+
+  !> Print `message` (prefixed with the rank) and abort all ranks of `comm`.
+  subroutine fatal_error(message, comm, code)
+    character(len=*), intent(in) :: message
+    type(MPI_Comm), intent(in), optional :: comm
+    integer, intent(in), optional :: code
+    type(MPI_Comm) :: c
+    integer :: rank, ierr, status
+    logical :: up, down
+
+    c = MPI_COMM_WORLD
+    if (present(comm)) c = comm
+    status = exit_internal
+    if (present(code)) status = code
+    call MPI_Initialized(up, ierr)
+    call MPI_Finalized(down, ierr)
+    rank = 0
+    if (up .and. .not. down) call MPI_Comm_rank(MPI_COMM_WORLD, rank, ierr)
+    flush (output_unit)
+    write (error_unit, '(a,i0,2a)') 'feticontact: ERROR (rank ', rank, '): ', trim(message)
+    flush (error_unit)
+    if (up .and. .not. down) call MPI_Abort(c, status, ierr)
+    error stop status, quiet=.true.
+  end subroutine fatal_error
+
+  !> Every rank of `comm` calls this together: rank 0 prints, all finalize, exit.
+  subroutine collective_error(message, comm, code)
+    character(len=*), intent(in) :: message
+    type(MPI_Comm), intent(in) :: comm
+    integer, intent(in) :: code
+    integer :: rank, ierr
+
+    call MPI_Comm_rank(comm, rank, ierr)
+    flush (output_unit)
+    if (rank == 0) then
+      write (error_unit, '(2a)') 'feticontact: ERROR: ', trim(message)
+      flush (error_unit)
+    end if
+    call MPI_Finalize(ierr)
+    error stop code, quiet=.true.
+  end subroutine collective_error
+
+  !> Abort with `message` when `status` is non-zero (for library return codes).
+  subroutine check_status(status, message)
+    integer, intent(in) :: status
+    character(len=*), intent(in) :: message
+    character(len=32) :: buf
+    if (status /= 0) then
+      write (buf, '(i0)') status
+      call fatal_error(trim(message)//' (status '//trim(buf)//')')
+    end if
+  end subroutine check_status
+end module errors

@@ -1,0 +1,764 @@
+!> Run parameters: the namelist groups, their defaults, reading, checking,
+!> broadcasting and echoing.
+!>
+!> Rank 0 reads the whole file, splits it into groups, reads each group with
+!> an internal namelist read, and checks the values. When a group fails to
+!> read, its assignments are read again one by one so that the message can
+!> name the variable at fault. The outcome (parameters or an error message) is
+!> broadcast, and on error every rank exits together with status 2.
+!> Every variable is documented in docs/INPUT.md.
+module params
+  use kinds, only: dp, ip, path_len, name_len
+  use errors, only: collective_error, exit_input_error
+  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Bcast, MPI_BYTE, MPI_INTEGER, MPI_CHARACTER
+  implicit none
+  private
+
+  public :: read_params, check_params, echo_params, params_json, default_params
+
+  integer, parameter :: msg_len = 1024
+
+  type, public :: mesh_params_t
+    integer(ip) :: nsub(3) = [2, 2, 2]        !< subdomains per direction
+    integer(ip) :: nel(3) = [4, 4, 4]         !< elements per subdomain per direction
+    real(dp) :: lengths(3) = [1, 1, 1]        !< box size Lx, Ly, Lz [mm]
+    real(dp) :: distortion = 0                !< inner node offset, fraction of h
+    integer(ip) :: distortion_seed = 1        !< seed of the node offsets
+    character(len=name_len) :: decomposition = 'box'  !< 'box' | 'metis'
+    character(len=name_len) :: mapping = 'block'      !< subdomains to ranks: 'block' | 'metis'
+  end type mesh_params_t
+
+  type, public :: material_params_t
+    real(dp) :: young = 2.1e5_dp              !< Young's modulus [MPa]
+    real(dp) :: poisson = 0.3_dp              !< Poisson's ratio
+    character(len=name_len) :: variation = 'none'  !< 'none' | 'checkerboard' | 'random'
+    real(dp) :: contrast = 1                  !< ratio of largest to smallest young
+    integer(ip) :: seed = 1                   !< seed of 'random'
+  end type material_params_t
+
+  type, public :: load_params_t
+    real(dp) :: top_pressure = 0              !< pressure on z = Lz, positive pushes down [MPa]
+  end type load_params_t
+
+  type, public :: boundary_params_t
+    logical :: top_dirichlet = .true.         !< prescribe u on z = Lz
+    real(dp) :: top_displacement(3) = [0.0_dp, 0.0_dp, -0.005_dp]  !< its value [mm]
+    logical :: symmetry_x0 = .false.          !< u_x = 0 on x = 0
+    logical :: symmetry_y0 = .false.          !< u_y = 0 on y = 0
+  end type boundary_params_t
+
+  type, public :: obstacle_params_t
+    character(len=name_len) :: shape = 'sphere'  !< 'sphere' | 'plane' | 'none'
+    real(dp) :: radius = 1                    !< sphere radius [mm]
+    real(dp) :: gap = 0                       !< initial gap below z = 0 [mm]
+  end type obstacle_params_t
+
+  type, public :: solver_params_t
+    real(dp) :: tol = 1.0e-6_dp               !< relative tolerance of SMALBE
+    integer(ip) :: max_outer = 200            !< SMALBE outer iterations
+    integer(ip) :: max_hessian = 20000        !< Hessian multiplications in total
+    real(dp) :: gamma = 1                     !< MPRGP proportioning parameter
+    real(dp) :: alpha_scale = 1.9_dp          !< expansion step alpha_bar = alpha_scale/||A||
+    character(len=name_len) :: expansion = 'fixed'  !< 'fixed' | 'optimal'
+    real(dp) :: rho_scale = 1                 !< penalty rho = rho_scale ||P F P||
+    real(dp) :: m_scale = 100                 !< initial M = m_scale ||A||
+    real(dp) :: beta = 0.5_dp                 !< M <- beta M when the SMALBE test fails
+    real(dp) :: eta_scale = 0.1_dp            !< inner precision eta = eta_scale ||b||
+    integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| power method
+    character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
+    character(len=name_len) :: local_ordering = 'amd'  !< 'amd' | 'metis'
+    real(dp) :: regularization = 1            !< rho_f relative to the mean diagonal of K
+    logical :: monitor = .true.               !< one line per outer iteration
+  end type solver_params_t
+
+  type, public :: reconstruction_params_t
+    character(len=name_len) :: method = 'both'  !< 'new' | 'standard' | 'both'
+    real(dp) :: active_tol = 1.0e-8_dp        !< contact row active if lambda > active_tol max(lambda)
+    real(dp) :: kkt_tol = 1.0e-3_dp           !< largest KKT residual accepted
+  end type reconstruction_params_t
+
+  type, public :: output_params_t
+    character(len=path_len) :: directory = 'output'  !< where results go
+    character(len=name_len) :: run_name = 'cube'      !< run name, file prefix
+    logical :: write_hdf5 = .true.            !< HDF5 + XDMF fields
+    logical :: write_report = .true.          !< report.json
+  end type output_params_t
+
+  !> All parameters of a run.
+  type, public :: params_t
+    character(len=path_len) :: file = ''
+    type(mesh_params_t) :: mesh
+    type(material_params_t) :: material
+    type(load_params_t) :: load
+    type(boundary_params_t) :: boundary
+    type(obstacle_params_t) :: obstacle
+    type(solver_params_t) :: solver
+    type(reconstruction_params_t) :: reconstruction
+    type(output_params_t) :: output
+  end type params_t
+
+  character(len=*), parameter :: group_names(8) = [character(len=14) :: 'mesh', 'material', &
+    'load', 'boundary', 'obstacle', 'solver', 'reconstruction', 'output']
+
+contains
+
+  !> The defaults of every variable.
+  function default_params() result(p)
+    type(params_t) :: p
+    p = params_t()
+  end function default_params
+
+  !> Read, check and broadcast the parameters of `file`. Collective over
+  !> `comm`; on any input error every rank exits with status 2.
+  subroutine read_params(file, comm, p)
+    character(len=*), intent(in) :: file
+    type(MPI_Comm), intent(in) :: comm
+    type(params_t), intent(out) :: p
+    integer :: rank, ierr, status
+    character(len=msg_len) :: msg
+
+    call MPI_Comm_rank(comm, rank, ierr)
+    status = 0
+    msg = ''
+    p = params_t()
+    if (rank == 0) then
+      call read_file(file, p, status, msg)
+      if (status == 0) call check_params(p, status, msg)
+    end if
+    call MPI_Bcast(status, 1, MPI_INTEGER, 0, comm, ierr)
+    if (status /= 0) then
+      call MPI_Bcast(msg, msg_len, MPI_CHARACTER, 0, comm, ierr)
+      call collective_error(msg, comm, exit_input_error)
+    end if
+    call MPI_Bcast(p, storage_size(p)/8, MPI_BYTE, 0, comm, ierr)
+  end subroutine read_params
+
+  !> Read every group of `file` into `p` (rank 0 only).
+  subroutine read_file(file, p, status, msg)
+    character(len=*), intent(in) :: file
+    type(params_t), intent(inout) :: p
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    character(len=:), allocatable :: text, group_text, name
+    integer :: pos, i
+    logical :: seen(size(group_names))
+
+    p%file = file
+    call load_text(file, text, status, msg)
+    if (status /= 0) return
+    seen = .false.
+    pos = 1
+    do
+      call next_group(text, pos, name, group_text, status, msg)
+      if (status /= 0) then
+        msg = 'file '//trim(file)//': '//trim(msg)
+        return
+      end if
+      if (.not. allocated(group_text)) exit
+      i = group_index(name)
+      if (i == 0) then
+        status = 1
+        msg = 'file '//trim(file)//': unknown namelist group &'//name// &
+              '; allowed groups: &mesh, &material, &load, &boundary, &obstacle, &solver, '// &
+              '&reconstruction, &output'
+        return
+      end if
+      if (seen(i)) then
+        status = 1
+        msg = 'file '//trim(file)//': group &'//name//' appears twice'
+        return
+      end if
+      seen(i) = .true.
+      call read_group_checked(name, group_text, p, status, msg)
+      if (status /= 0) then
+        msg = 'file '//trim(file)//', group &'//name//': '//trim(msg)
+        return
+      end if
+    end do
+  end subroutine read_file
+
+  !> The whole file as one line: comments removed, line ends made blanks.
+  subroutine load_text(file, text, status, msg)
+    character(len=*), intent(in) :: file
+    character(len=:), allocatable, intent(out) :: text
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    integer :: unit, fsize, i
+    character(len=:), allocatable :: raw
+    character :: quote
+    logical :: exists, comment
+
+    msg = ''
+    inquire (file=file, exist=exists)
+    if (.not. exists) then
+      status = 1
+      msg = 'input file '//trim(file)//' does not exist'
+      return
+    end if
+    open (newunit=unit, file=file, access='stream', form='unformatted', status='old', &
+          action='read', iostat=status, iomsg=msg)
+    if (status /= 0) then
+      msg = 'cannot open input file '//trim(file)//': '//trim(msg)
+      return
+    end if
+    inquire (unit=unit, size=fsize)
+    if (fsize < 0) then
+      status = 1
+      msg = 'cannot read input file '//trim(file)//' (not a regular file)'
+      close (unit)
+      return
+    end if
+    allocate (character(len=fsize) :: raw)
+    if (fsize > 0) read (unit, iostat=status, iomsg=msg) raw
+    close (unit)
+    if (status /= 0) then
+      msg = 'cannot read input file '//trim(file)//': '//trim(msg)
+      return
+    end if
+    ! Blank out comments (from ! to the end of the line, outside quotes) and line ends.
+    quote = ' '
+    comment = .false.
+    do i = 1, fsize
+      if (raw(i:i) == achar(10) .or. raw(i:i) == achar(13)) then
+        comment = .false.
+        raw(i:i) = ' '
+      else if (comment) then
+        raw(i:i) = ' '
+      else if (quote /= ' ') then
+        if (raw(i:i) == quote) quote = ' '
+      else if (raw(i:i) == '"' .or. raw(i:i) == "'") then
+        quote = raw(i:i)
+      else if (raw(i:i) == '!') then
+        comment = .true.
+        raw(i:i) = ' '
+      else if (raw(i:i) == achar(9)) then
+        raw(i:i) = ' '
+      end if
+    end do
+    ! Fold runs of blanks outside quotes into one (gfortran's namelist reading
+    ! of some wrong values depends on the number of blanks that follow them).
+    text = ''
+    quote = ' '
+    do i = 1, fsize
+      if (quote /= ' ') then
+        if (raw(i:i) == quote) quote = ' '
+      else if (raw(i:i) == '"' .or. raw(i:i) == "'") then
+        quote = raw(i:i)
+      else if (raw(i:i) == ' ' .and. i > 1) then
+        if (raw(i - 1:i - 1) == ' ') cycle
+      end if
+      text = text//raw(i:i)
+    end do
+  end subroutine load_text
+
+  !> Find the next group from `pos`: its lower-case name and its text
+  !> ('&name ... /'). `group_text` stays unallocated when there is none.
+  subroutine next_group(text, pos, name, group_text, status, msg)
+    character(len=*), intent(in) :: text
+    integer, intent(inout) :: pos
+    character(len=:), allocatable, intent(out) :: name, group_text
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    integer :: i, start, name_end
+    character :: quote
+
+    status = 0
+    msg = ''
+    i = pos
+    do while (i <= len(text))
+      if (text(i:i) /= ' ') exit
+      i = i + 1
+    end do
+    if (i > len(text)) return
+    if (text(i:i) /= '&' .and. text(i:i) /= '$') then
+      status = 1
+      msg = 'text outside a namelist group near "'//snippet(text, i)//'"'
+      return
+    end if
+    start = i
+    name_end = i
+    do while (name_end < len(text))
+      if (.not. is_name_char(text(name_end + 1:name_end + 1))) exit
+      name_end = name_end + 1
+    end do
+    name = lower(text(start + 1:name_end))
+    if (len(name) == 0) then
+      status = 1
+      msg = 'a group has no name near "'//snippet(text, i)//'"'
+      return
+    end if
+    quote = ' '
+    do i = name_end + 1, len(text)
+      if (quote /= ' ') then
+        if (text(i:i) == quote) quote = ' '
+      else if (text(i:i) == '"' .or. text(i:i) == "'") then
+        quote = text(i:i)
+      else if (text(i:i) == '/') then
+        group_text = text(start:i)
+        pos = i + 1
+        return
+      else if (text(i:i) == '&' .or. text(i:i) == '$') then
+        if (lower(text(i:min(i + 3, len(text)))) == '&end' .or. &
+            lower(text(i:min(i + 3, len(text)))) == '$end') then
+          group_text = text(start:i - 1)//'/'
+          pos = i + 4
+          return
+        end if
+        exit
+      end if
+    end do
+    status = 1
+    msg = 'group &'//name//' is not closed with "/"'
+  end subroutine next_group
+
+  !> Read one group; on failure find the assignment at fault.
+  subroutine read_group_checked(name, group_text, p, status, msg)
+    character(len=*), intent(in) :: name, group_text
+    type(params_t), intent(inout) :: p
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    type(params_t) :: scratch
+    integer :: body_start, i, k, nstarts, s2
+    integer, allocatable :: starts(:)
+    character(len=:), allocatable :: body, piece, variable
+    character(len=msg_len) :: msg2
+
+    call read_group(name, group_text, p, status, msg)
+    if (status == 0) return
+    ! Locate the assignments 'variable = values' and read them one at a time.
+    body_start = index(group_text, ' ')
+    if (body_start == 0) body_start = len(group_text)
+    body = group_text(body_start:len(group_text) - 1)
+    call assignment_starts(body, starts, nstarts)
+    scratch = p
+    ! gfortran (12) accepts the read that follows a failed logical read: an
+    ! empty read of the group first puts its reader back into a clean state.
+    call read_group(name, '&'//name//' /', scratch, s2, msg2)
+    do k = 1, nstarts
+      if (k < nstarts) then
+        piece = body(starts(k):starts(k + 1) - 1)
+      else
+        piece = body(starts(k):)
+      end if
+      call read_group(name, '&'//name//' '//trim(adjustl(piece))//' /', scratch, s2, msg2)
+      if (s2 /= 0) then
+        i = index(piece, '=')
+        variable = lower(trim(adjustl(piece(1:i - 1))))
+        msg = 'variable '//variable//': '//describe(msg2, variable)// &
+              ' (in "'//trim(adjustl(piece))//'")'
+        return
+      end if
+    end do
+    msg = describe(msg, '')
+  end subroutine read_group_checked
+
+  !> Turn a compiler's namelist message about `variable` into one for a user.
+  function describe(iomsg, variable) result(text)
+    character(len=*), intent(in) :: iomsg, variable
+    character(len=:), allocatable :: text, unknown
+    integer :: i
+    i = index(iomsg, 'Cannot match namelist object name')
+    text = 'cannot read the value: '//trim(iomsg)
+    if (i == 0) return
+    unknown = lower(trim(adjustl(iomsg(i + 33:))))
+    unknown = unknown(max(1, verify(unknown, achar(39)//achar(34))):)
+    if (index(unknown, variable) == 1 .or. len(variable) == 0) &
+      text = 'not a variable of this group (see docs/INPUT.md for the allowed ones)'
+  end function describe
+
+  !> Positions in `body` where an assignment 'name[(...)] =' starts.
+  subroutine assignment_starts(body, starts, n)
+    character(len=*), intent(in) :: body
+    integer, allocatable, intent(out) :: starts(:)
+    integer, intent(out) :: n
+    integer :: i, j, depth
+    character :: quote
+    allocate (starts(len(body) + 1))
+    n = 0
+    quote = ' '
+    depth = 0
+    do i = 1, len(body)
+      if (quote /= ' ') then
+        if (body(i:i) == quote) quote = ' '
+        cycle
+      end if
+      select case (body(i:i))
+      case ('"', "'")
+        quote = body(i:i)
+      case ('(')
+        depth = depth + 1
+      case (')')
+        depth = depth - 1
+      case ('=')
+        if (depth /= 0) cycle
+        ! walk back over blanks, an optional (...) and the name
+        j = i - 1
+        do while (j >= 1)
+          if (body(j:j) /= ' ') exit
+          j = j - 1
+        end do
+        if (j >= 1) then
+          if (body(j:j) == ')') then
+            do while (j >= 1)
+              if (body(j:j) == '(') exit
+              j = j - 1
+            end do
+            j = j - 1
+          end if
+        end if
+        do while (j >= 1)
+          if (.not. (is_name_char(body(j:j)) .or. body(j:j) == '%')) exit
+          j = j - 1
+        end do
+        n = n + 1
+        starts(n) = j + 1
+      end select
+    end do
+    if (n == 0) then
+      n = 1
+      starts(1) = 1
+    end if
+  end subroutine assignment_starts
+
+  !> Read the namelist group `name` from the text `group_text` into `p`.
+  subroutine read_group(name, group_text, p, status, msg)
+    character(len=*), intent(in) :: name, group_text
+    type(params_t), intent(inout) :: p
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    integer(ip) :: nsub(3), nel(3), distortion_seed, seed, max_outer, max_hessian, power_iterations
+    real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
+                radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, &
+                regularization, active_tol, kkt_tol
+    character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
+                               local_ordering, method
+    character(len=path_len) :: directory
+    logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report
+    namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping
+    namelist /material/ young, poisson, variation, contrast, seed
+    namelist /load/ top_pressure
+    namelist /boundary/ top_dirichlet, top_displacement, symmetry_x0, symmetry_y0
+    namelist /obstacle/ shape, radius, gap
+    namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
+      m_scale, beta, eta_scale, power_iterations, coarse, local_ordering, regularization, monitor
+    namelist /reconstruction/ method, active_tol, kkt_tol
+    character(len=name_len) :: run_name
+    namelist /output/ directory, run_name, write_hdf5, write_report
+
+    msg = ''
+    status = 0
+    select case (name)
+    case ('mesh')
+      nsub = p%mesh%nsub; nel = p%mesh%nel; lengths = p%mesh%lengths
+      distortion = p%mesh%distortion; distortion_seed = p%mesh%distortion_seed
+      decomposition = p%mesh%decomposition; mapping = p%mesh%mapping
+      read (group_text, nml=mesh, iostat=status, iomsg=msg)
+      p%mesh = mesh_params_t(nsub, nel, lengths, distortion, distortion_seed, &
+                             lower(decomposition), lower(mapping))
+    case ('material')
+      young = p%material%young; poisson = p%material%poisson
+      variation = p%material%variation; contrast = p%material%contrast; seed = p%material%seed
+      read (group_text, nml=material, iostat=status, iomsg=msg)
+      p%material = material_params_t(young, poisson, lower(variation), contrast, seed)
+    case ('load')
+      top_pressure = p%load%top_pressure
+      read (group_text, nml=load, iostat=status, iomsg=msg)
+      p%load = load_params_t(top_pressure)
+    case ('boundary')
+      top_dirichlet = p%boundary%top_dirichlet; top_displacement = p%boundary%top_displacement
+      symmetry_x0 = p%boundary%symmetry_x0; symmetry_y0 = p%boundary%symmetry_y0
+      read (group_text, nml=boundary, iostat=status, iomsg=msg)
+      p%boundary = boundary_params_t(top_dirichlet, top_displacement, symmetry_x0, symmetry_y0)
+    case ('obstacle')
+      shape = p%obstacle%shape; radius = p%obstacle%radius; gap = p%obstacle%gap
+      read (group_text, nml=obstacle, iostat=status, iomsg=msg)
+      p%obstacle = obstacle_params_t(lower(shape), radius, gap)
+    case ('solver')
+      associate (s => p%solver)
+        tol = s%tol; max_outer = s%max_outer; max_hessian = s%max_hessian; gamma = s%gamma
+        alpha_scale = s%alpha_scale; expansion = s%expansion; rho_scale = s%rho_scale
+        m_scale = s%m_scale; beta = s%beta; eta_scale = s%eta_scale
+        power_iterations = s%power_iterations; coarse = s%coarse
+        local_ordering = s%local_ordering; regularization = s%regularization; monitor = s%monitor
+      end associate
+      read (group_text, nml=solver, iostat=status, iomsg=msg)
+      p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
+                                 rho_scale, m_scale, beta, eta_scale, power_iterations, lower(coarse), &
+                                 lower(local_ordering), regularization, monitor)
+    case ('reconstruction')
+      method = p%reconstruction%method; active_tol = p%reconstruction%active_tol
+      kkt_tol = p%reconstruction%kkt_tol
+      read (group_text, nml=reconstruction, iostat=status, iomsg=msg)
+      p%reconstruction = reconstruction_params_t(lower(method), active_tol, kkt_tol)
+    case ('output')
+      directory = p%output%directory; run_name = p%output%run_name
+      write_hdf5 = p%output%write_hdf5; write_report = p%output%write_report
+      read (group_text, nml=output, iostat=status, iomsg=msg)
+      p%output = output_params_t(directory, run_name, write_hdf5, write_report)
+    end select
+  end subroutine read_group
+
+  !> Check every value; the first violation gives `status` /= 0 and a message
+  !> naming the group, the variable and the allowed values.
+  subroutine check_params(p, status, msg)
+    type(params_t), intent(in) :: p
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+
+    status = 0
+    msg = ''
+    associate (m => p%mesh)
+      if (any(m%nsub < 1)) call fail('mesh', 'nsub', 'each entry must be >= 1', ints(m%nsub))
+      if (any(m%nel < 1)) call fail('mesh', 'nel', 'each entry must be >= 1', ints(m%nel))
+      if (any(m%lengths <= 0)) call fail('mesh', 'lengths', 'each entry must be > 0', reals(m%lengths))
+      if (m%distortion < 0 .or. m%distortion >= 0.5_dp) &
+        call fail('mesh', 'distortion', 'must be in [0, 0.5)', reals([m%distortion]))
+      if (.not. one_of(m%decomposition, [character(len=8) :: 'box', 'metis'])) &
+        call fail('mesh', 'decomposition', "must be 'box' or 'metis'", m%decomposition)
+      if (.not. one_of(m%mapping, [character(len=8) :: 'block', 'metis'])) &
+        call fail('mesh', 'mapping', "must be 'block' or 'metis'", m%mapping)
+      if (status == 0 .and. product(int(m%nsub, 8)) * product(int(m%nel, 8)) > 2**27) &
+        call fail('mesh', 'nsub, nel', 'give at most 2**27 elements in all', &
+                  ints(m%nsub)//' x '//ints(m%nel))
+    end associate
+    associate (m => p%material)
+      if (m%young <= 0) call fail('material', 'young', 'must be > 0', reals([m%young]))
+      if (m%poisson <= -1 .or. m%poisson >= 0.5_dp) &
+        call fail('material', 'poisson', 'must be in (-1, 0.5)', reals([m%poisson]))
+      if (.not. one_of(m%variation, [character(len=12) :: 'none', 'checkerboard', 'random'])) &
+        call fail('material', 'variation', "must be 'none', 'checkerboard' or 'random'", m%variation)
+      if (m%contrast < 1) call fail('material', 'contrast', 'must be >= 1', reals([m%contrast]))
+    end associate
+    associate (b => p%boundary)
+      if (.not. (b%top_dirichlet .or. b%symmetry_x0 .or. b%symmetry_y0 .or. p%obstacle%shape /= 'none')) &
+        call fail('boundary', 'top_dirichlet', &
+                  'the body must be held: set top_dirichlet, a symmetry plane or an obstacle', 'F')
+    end associate
+    associate (o => p%obstacle)
+      if (.not. one_of(o%shape, [character(len=8) :: 'sphere', 'plane', 'none'])) &
+        call fail('obstacle', 'shape', "must be 'sphere', 'plane' or 'none'", o%shape)
+      if (o%radius <= 0) call fail('obstacle', 'radius', 'must be > 0', reals([o%radius]))
+    end associate
+    associate (s => p%solver)
+      if (s%tol <= 0 .or. s%tol >= 1) call fail('solver', 'tol', 'must be in (0, 1)', reals([s%tol]))
+      if (s%max_outer < 1) call fail('solver', 'max_outer', 'must be >= 1', ints([s%max_outer]))
+      if (s%max_hessian < 1) call fail('solver', 'max_hessian', 'must be >= 1', ints([s%max_hessian]))
+      if (s%gamma <= 0) call fail('solver', 'gamma', 'must be > 0', reals([s%gamma]))
+      if (s%alpha_scale <= 0 .or. s%alpha_scale > 2) &
+        call fail('solver', 'alpha_scale', 'must be in (0, 2]', reals([s%alpha_scale]))
+      if (.not. one_of(s%expansion, [character(len=8) :: 'fixed', 'optimal'])) &
+        call fail('solver', 'expansion', "must be 'fixed' or 'optimal'", s%expansion)
+      if (s%rho_scale <= 0) call fail('solver', 'rho_scale', 'must be > 0', reals([s%rho_scale]))
+      if (s%m_scale <= 0) call fail('solver', 'm_scale', 'must be > 0', reals([s%m_scale]))
+      if (s%beta <= 0 .or. s%beta >= 1) call fail('solver', 'beta', 'must be in (0, 1)', reals([s%beta]))
+      if (s%eta_scale <= 0) call fail('solver', 'eta_scale', 'must be > 0', reals([s%eta_scale]))
+      if (s%power_iterations < 1) &
+        call fail('solver', 'power_iterations', 'must be >= 1', ints([s%power_iterations]))
+      if (.not. one_of(s%coarse, [character(len=8) :: 'mumps', 'cholesky'])) &
+        call fail('solver', 'coarse', "must be 'mumps' or 'cholesky'", s%coarse)
+      if (.not. one_of(s%local_ordering, [character(len=8) :: 'amd', 'metis'])) &
+        call fail('solver', 'local_ordering', "must be 'amd' or 'metis'", s%local_ordering)
+      if (s%regularization <= 0) &
+        call fail('solver', 'regularization', 'must be > 0', reals([s%regularization]))
+    end associate
+    associate (r => p%reconstruction)
+      if (.not. one_of(r%method, [character(len=8) :: 'new', 'standard', 'both'])) &
+        call fail('reconstruction', 'method', "must be 'new', 'standard' or 'both'", r%method)
+      if (r%active_tol < 0 .or. r%active_tol >= 1) &
+        call fail('reconstruction', 'active_tol', 'must be in [0, 1)', reals([r%active_tol]))
+      if (r%kkt_tol <= 0) call fail('reconstruction', 'kkt_tol', 'must be > 0', reals([r%kkt_tol]))
+    end associate
+    associate (o => p%output)
+      if (len_trim(o%directory) == 0) call fail('output', 'directory', 'must not be empty', "''")
+      if (len_trim(o%run_name) == 0 .or. verify(trim(o%run_name), &
+          'abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-.') /= 0) &
+        call fail('output', 'run_name', 'must be a non-empty word of letters, digits, _ - .', o%run_name)
+    end associate
+
+  contains
+
+    subroutine fail(group, variable, rule, got)
+      character(len=*), intent(in) :: group, variable, rule, got
+      if (status /= 0) return
+      status = 1
+      msg = 'file '//trim(p%file)//', group &'//group//', variable '//variable//': '//rule// &
+            ' (got '//trim(got)//')'
+    end subroutine fail
+  end subroutine check_params
+
+  !> Print the parameters actually used (rank 0 writes).
+  subroutine echo_params(p, unit)
+    type(params_t), intent(in) :: p
+    integer, intent(in) :: unit
+    write (unit, '(a)') 'input file: '//trim(p%file)
+    write (unit, '(a)') '&mesh nsub = '//ints(p%mesh%nsub)//', nel = '//ints(p%mesh%nel)// &
+      ', lengths = '//reals(p%mesh%lengths)//', distortion = '//reals([p%mesh%distortion])// &
+      ', distortion_seed = '//ints([p%mesh%distortion_seed])//", decomposition = '"// &
+      trim(p%mesh%decomposition)//"', mapping = '"//trim(p%mesh%mapping)//"' /"
+    write (unit, '(a)') '&material young = '//reals([p%material%young])//', poisson = '// &
+      reals([p%material%poisson])//", variation = '"//trim(p%material%variation)// &
+      "', contrast = "//reals([p%material%contrast])//', seed = '//ints([p%material%seed])//' /'
+    write (unit, '(a)') '&load top_pressure = '//reals([p%load%top_pressure])//' /'
+    write (unit, '(a)') '&boundary top_dirichlet = '//logs(p%boundary%top_dirichlet)// &
+      ', top_displacement = '//reals(p%boundary%top_displacement)//', symmetry_x0 = '// &
+      logs(p%boundary%symmetry_x0)//', symmetry_y0 = '//logs(p%boundary%symmetry_y0)//' /'
+    write (unit, '(a)') "&obstacle shape = '"//trim(p%obstacle%shape)//"', radius = "// &
+      reals([p%obstacle%radius])//', gap = '//reals([p%obstacle%gap])//' /'
+    associate (s => p%solver)
+      write (unit, '(a)') '&solver tol = '//reals([s%tol])//', max_outer = '//ints([s%max_outer])// &
+        ', max_hessian = '//ints([s%max_hessian])//', gamma = '//reals([s%gamma])// &
+        ', alpha_scale = '//reals([s%alpha_scale])//", expansion = '"//trim(s%expansion)// &
+        "', rho_scale = "//reals([s%rho_scale])//', m_scale = '//reals([s%m_scale])// &
+        ', beta = '//reals([s%beta])//', eta_scale = '//reals([s%eta_scale])// &
+        ', power_iterations = '//ints([s%power_iterations])//", coarse = '"//trim(s%coarse)// &
+        "', local_ordering = '"//trim(s%local_ordering)//"', regularization = "// &
+        reals([s%regularization])//', monitor = '//logs(s%monitor)//' /'
+    end associate
+    write (unit, '(a)') "&reconstruction method = '"//trim(p%reconstruction%method)// &
+      "', active_tol = "//reals([p%reconstruction%active_tol])//', kkt_tol = '// &
+      reals([p%reconstruction%kkt_tol])//' /'
+    write (unit, '(a)') "&output directory = '"//trim(p%output%directory)//"', run_name = '"// &
+      trim(p%output%run_name)//"', write_hdf5 = "//logs(p%output%write_hdf5)//', write_report = '// &
+      logs(p%output%write_report)//' /'
+  end subroutine echo_params
+
+  !> The parameters as a JSON object (for report.json).
+  function params_json(p) result(json)
+    type(params_t), intent(in) :: p
+    character(len=:), allocatable :: json
+    json = '{"file": "'//trim(p%file)//'", ' // &
+      '"mesh": {"nsub": ['//jints(p%mesh%nsub)//'], "nel": ['//jints(p%mesh%nel)// &
+      '], "lengths": ['//jreals(p%mesh%lengths)//'], "distortion": '//jreals([p%mesh%distortion])// &
+      ', "distortion_seed": '//jints([p%mesh%distortion_seed])//', "decomposition": "'// &
+      trim(p%mesh%decomposition)//'", "mapping": "'//trim(p%mesh%mapping)//'"}, '// &
+      '"material": {"young": '//jreals([p%material%young])//', "poisson": '// &
+      jreals([p%material%poisson])//', "variation": "'//trim(p%material%variation)// &
+      '", "contrast": '//jreals([p%material%contrast])//', "seed": '//jints([p%material%seed])//'}, '// &
+      '"load": {"top_pressure": '//jreals([p%load%top_pressure])//'}, '// &
+      '"boundary": {"top_dirichlet": '//jlog(p%boundary%top_dirichlet)//', "top_displacement": ['// &
+      jreals(p%boundary%top_displacement)//'], "symmetry_x0": '//jlog(p%boundary%symmetry_x0)// &
+      ', "symmetry_y0": '//jlog(p%boundary%symmetry_y0)//'}, '// &
+      '"obstacle": {"shape": "'//trim(p%obstacle%shape)//'", "radius": '//jreals([p%obstacle%radius])// &
+      ', "gap": '//jreals([p%obstacle%gap])//'}, '// &
+      '"solver": {"tol": '//jreals([p%solver%tol])//', "max_outer": '//jints([p%solver%max_outer])// &
+      ', "max_hessian": '//jints([p%solver%max_hessian])//', "gamma": '//jreals([p%solver%gamma])// &
+      ', "alpha_scale": '//jreals([p%solver%alpha_scale])//', "expansion": "'//trim(p%solver%expansion)// &
+      '", "rho_scale": '//jreals([p%solver%rho_scale])//', "m_scale": '//jreals([p%solver%m_scale])// &
+      ', "beta": '//jreals([p%solver%beta])//', "eta_scale": '//jreals([p%solver%eta_scale])// &
+      ', "power_iterations": '//jints([p%solver%power_iterations])//', "coarse": "'// &
+      trim(p%solver%coarse)//'", "local_ordering": "'//trim(p%solver%local_ordering)// &
+      '", "regularization": '//jreals([p%solver%regularization])//', "monitor": '// &
+      jlog(p%solver%monitor)//'}, '// &
+      '"reconstruction": {"method": "'//trim(p%reconstruction%method)//'", "active_tol": '// &
+      jreals([p%reconstruction%active_tol])//', "kkt_tol": '//jreals([p%reconstruction%kkt_tol])//'}, '// &
+      '"output": {"directory": "'//trim(p%output%directory)//'", "run_name": "'//trim(p%output%run_name)// &
+      '", "write_hdf5": '//jlog(p%output%write_hdf5)//', "write_report": '// &
+      jlog(p%output%write_report)//'}}'
+  end function params_json
+
+  ! ---- small text helpers ----
+
+  !> Position of `name` in group_names, 0 if it is not a group.
+  integer function group_index(name)
+    character(len=*), intent(in) :: name
+    integer :: k
+    group_index = 0
+    do k = 1, size(group_names)
+      if (trim(group_names(k)) == name) group_index = k
+    end do
+  end function group_index
+
+  pure logical function is_name_char(c)
+    character, intent(in) :: c
+    is_name_char = (c >= 'a' .and. c <= 'z') .or. (c >= 'A' .and. c <= 'Z') .or. &
+                   (c >= '0' .and. c <= '9') .or. c == '_'
+  end function is_name_char
+
+  pure function lower(s) result(r)
+    character(len=*), intent(in) :: s
+    character(len=len(s)) :: r
+    integer :: i
+    r = s
+    do i = 1, len(s)
+      if (s(i:i) >= 'A' .and. s(i:i) <= 'Z') r(i:i) = achar(iachar(s(i:i)) + 32)
+    end do
+  end function lower
+
+  logical function one_of(value, allowed)
+    character(len=*), intent(in) :: value
+    character(len=*), intent(in) :: allowed(:)
+    one_of = any(allowed == value)
+  end function one_of
+
+  function snippet(text, i) result(s)
+    character(len=*), intent(in) :: text
+    integer, intent(in) :: i
+    character(len=:), allocatable :: s
+    s = trim(text(i:min(len(text), i + 30)))
+  end function snippet
+
+  function ints(v) result(s)
+    integer(ip), intent(in) :: v(:)
+    character(len=:), allocatable :: s
+    character(len=24) :: buf
+    integer :: k
+    s = ''
+    do k = 1, size(v)
+      write (buf, '(i0)') v(k)
+      s = s//trim(buf)
+      if (k < size(v)) s = s//' '
+    end do
+  end function ints
+
+  function reals(v) result(s)
+    real(dp), intent(in) :: v(:)
+    character(len=:), allocatable :: s
+    character(len=32) :: buf
+    integer :: k
+    s = ''
+    do k = 1, size(v)
+      write (buf, '(g0.6)') v(k)
+      s = s//trim(adjustl(buf))
+      if (k < size(v)) s = s//' '
+    end do
+  end function reals
+
+  function logs(v) result(s)
+    logical, intent(in) :: v
+    character(len=:), allocatable :: s
+    s = merge('T', 'F', v)
+  end function logs
+
+  function jints(v) result(s)
+    integer(ip), intent(in) :: v(:)
+    character(len=:), allocatable :: s
+    character(len=24) :: buf
+    integer :: k
+    s = ''
+    do k = 1, size(v)
+      write (buf, '(i0)') v(k)
+      s = s//trim(buf)
+      if (k < size(v)) s = s//', '
+    end do
+  end function jints
+
+  function jreals(v) result(s)
+    real(dp), intent(in) :: v(:)
+    character(len=:), allocatable :: s
+    character(len=32) :: buf
+    integer :: k
+    s = ''
+    do k = 1, size(v)
+      write (buf, '(es24.16e3)') v(k)
+      s = s//trim(adjustl(buf))
+      if (k < size(v)) s = s//', '
+    end do
+  end function jreals
+
+  function jlog(v) result(s)
+    logical, intent(in) :: v
+    character(len=:), allocatable :: s
+    s = merge('true ', 'false', v)
+    s = trim(s)
+  end function jlog
+end module params
