@@ -1,0 +1,214 @@
+!> The coarse problem (CP): G G^T with G = R^T B^T, assembled in distributed
+!> form and factorized once by MUMPS; solves with it.
+!>
+!> Coarse vectors have 6 entries per subdomain. Each rank stores the blocks of
+!> its own subdomains ("local coarse blocks", in the order of its local
+!> subdomain list). The global coarse numbering is rank-major (all subdomains
+!> of rank 0, then of rank 1, ...), so a gather of the local blocks to rank 0
+!> gives a global vector without any permutation.
+!>
+!> Assembly: every multiplier row r contributes g_r g_r^T, where g_r has one
+!> 6-block per subdomain copy the row touches (the entries val * R^s(dof, :)
+!> of G^T). The blocks of a row are summed at its owner with one
+!> neighbour exchange (8 slots of 6 values per row), and the owner adds the
+!> 6x6 products into a hash of (s, t) blocks. MUMPS sums the blocks different
+!> ranks give for the same (s, t) (distributed assembled input).
+!> An optional row mask restricts the sum to some rows: the standard
+!> reconstruction's G_A G_A^T uses the same code.
+module coarse_problem
+  use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_IP
+  use errors, only: fatal_error
+  use decomposition, only: decomposition_t
+  use constraints, only: constraints_t
+  use mumps_wrapper, only: mumps_t
+  use block_hash, only: block_hash_t
+  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gatherv, MPI_Scatterv, MPI_Wtime
+  implicit none
+  private
+
+  public :: coarse_layout_t, build_coarse_layout
+
+  !> Where the coarse blocks of every subdomain live.
+  type :: coarse_layout_t
+    integer(ip) :: nsub = 0                 !< subdomains in all
+    integer(ip) :: nlocal = 0               !< subdomains of this rank
+    integer(ip), allocatable :: position(:) !< subdomain id -> global coarse position 1..nsub
+    integer, allocatable :: counts(:), displs(:)  !< per rank: 6*subdomains and offsets (Gatherv)
+  end type coarse_layout_t
+
+  type, public :: coarse_problem_t
+    type(MPI_Comm) :: comm
+    type(coarse_layout_t) :: layout
+    integer(ip) :: n = 0                    !< coarse dimension 6*nsub
+    integer(i8) :: nnz_local = 0            !< entries this rank gave to MUMPS
+    type(mumps_t) :: mumps
+    real(dp), allocatable :: rhs(:, :)      !< (n, 1) on rank 0
+    logical :: factorized = .false.
+    real(dp) :: seconds_factorization = 0   !< MUMPS analysis + factorization in init
+  contains
+    procedure :: init
+    procedure :: solve
+    procedure :: free
+  end type coarse_problem_t
+
+contains
+
+  !> The rank-major coarse numbering for the decomposition `dec`.
+  subroutine build_coarse_layout(dec, comm, layout)
+    type(decomposition_t), intent(in) :: dec
+    type(MPI_Comm), intent(in) :: comm
+    type(coarse_layout_t), intent(out) :: layout
+    integer :: nranks, ierr, r
+    integer(ip) :: s, pos
+    integer(ip), allocatable :: per_rank(:)
+
+    call MPI_Comm_size(comm, nranks, ierr)
+    layout%nsub = dec%nsubdomains
+    layout%nlocal = size(dec%local_subdomains, kind=ip)
+    allocate (layout%position(layout%nsub), per_rank(0:nranks - 1), layout%counts(nranks), &
+              layout%displs(nranks))
+    per_rank = 0
+    do s = 1, layout%nsub
+      per_rank(dec%subdomain_rank(s)) = per_rank(dec%subdomain_rank(s)) + 1
+    end do
+    layout%displs(1) = 0
+    do r = 1, nranks
+      layout%counts(r) = 6*per_rank(r - 1)
+      if (r > 1) layout%displs(r) = layout%displs(r - 1) + layout%counts(r - 1)
+    end do
+    ! position: rank-major, ascending id within a rank
+    per_rank = 0
+    do r = 0, nranks - 1
+      if (r > 0) per_rank(r) = per_rank(r - 1) + layout%counts(r)/6
+    end do
+    do s = 1, layout%nsub
+      r = dec%subdomain_rank(s)
+      pos = per_rank(r) + 1
+      per_rank(r) = pos
+      layout%position(s) = pos
+    end do
+  end subroutine build_coarse_layout
+
+  !> Assemble G G^T (or G_A G_A^T with `mask`) and factorize it. `con%b(:)%g`
+  !> must hold the entries of G^T. Collective.
+  subroutine init(this, dec, con, layout, comm, mask)
+    class(coarse_problem_t), intent(inout) :: this
+    type(decomposition_t), intent(in) :: dec
+    type(constraints_t), intent(inout) :: con
+    type(coarse_layout_t), intent(in) :: layout
+    type(MPI_Comm), intent(in) :: comm
+    logical, intent(in), optional :: mask(:)
+    real(dp), allocatable :: slots_local(:, :), slots_own(:, :)
+    integer(ip) :: copies(8), ncopies
+    integer(ip), allocatable :: irn(:), jcn(:)
+    real(dp), allocatable :: a(:)
+    integer(ip) :: ls, e, i, j1, j2, ps, pt, m, index, kind
+    integer :: rank, ierr
+    type(block_hash_t) :: blocks
+    real(dp) :: t0
+
+    call this%free()
+    this%comm = comm
+    this%layout = layout
+    this%n = 6*layout%nsub
+    call MPI_Comm_rank(comm, rank, ierr)
+
+    ! 1. the 6-blocks of every local row, by copy slot; summed at the owner
+    allocate (slots_local(48, con%n_local), slots_own(48, con%n_own))
+    slots_local = 0
+    do ls = 1, size(con%b, kind=ip)
+      associate (bs => con%b(ls))
+        do e = 1, bs%nentries
+          i = 6*(bs%slot(e) - 1)
+          slots_local(i + 1:i + 6, bs%row(e)) = slots_local(i + 1:i + 6, bs%row(e)) + bs%g(:, e)
+        end do
+      end associate
+    end do
+    call con%exchange%scatter_add_multi(48, slots_local, slots_own)
+    deallocate (slots_local)
+
+    ! 2. g_r g_r^T of every owned row into 6x6 blocks
+    call blocks%init(max(64_ip, 8*layout%nlocal + con%n_own/4))
+    do i = 1, con%n_own
+      if (present(mask)) then
+        if (.not. mask(i)) cycle
+      end if
+      call dec%node_subdomain_list(con%node(i), copies, ncopies)
+      kind = int(mod(con%key(i)/8, 4_i8), ip)
+      index = int(mod(con%key(i), 8_i8), ip) + 1
+      if (kind == 0) then          ! gluing row k = index: copies 1..k+1
+        m = index + 1
+        do j1 = 1, m
+          do j2 = j1, m
+            ps = layout%position(copies(j1))
+            pt = layout%position(copies(j2))
+            call add_product(ps, pt, slots_own(6*j1 - 5:6*j1, i), slots_own(6*j2 - 5:6*j2, i))
+          end do
+        end do
+      else                         ! Dirichlet (copy `index`) or contact (copy 1): one block
+        j1 = merge(index, 1_ip, kind == 1)
+        ps = layout%position(copies(j1))
+        call add_product(ps, ps, slots_own(6*j1 - 5:6*j1, i), slots_own(6*j1 - 5:6*j1, i))
+      end if
+    end do
+
+    ! 3. COO of the upper triangle, to MUMPS
+    call blocks%to_coo(irn, jcn, a)
+    this%nnz_local = size(a, kind=i8)
+    call this%mumps%init(comm, .true.)
+    call this%mumps%set_distributed(this%n, irn, jcn, a)
+    call this%mumps%set_ordering('auto')
+    t0 = MPI_Wtime()
+    call this%mumps%factorize()
+    this%seconds_factorization = MPI_Wtime() - t0
+    this%factorized = .true.
+    if (rank == 0) then
+      allocate (this%rhs(this%n, 1))
+    else
+      allocate (this%rhs(1, 1))
+    end if
+
+  contains
+
+    !> block(ps, pt) += u v^T, kept as an upper-triangular block pair
+    subroutine add_product(ps, pt, u, v)
+      integer(ip), intent(in) :: ps, pt
+      real(dp), intent(in) :: u(6), v(6)
+      real(dp) :: outer(6, 6)
+      integer :: a1, a2
+      do a2 = 1, 6
+        do a1 = 1, 6
+          outer(a1, a2) = u(a1)*v(a2)
+        end do
+      end do
+      if (ps <= pt) then
+        call blocks%add(ps, pt, outer)
+      else
+        call blocks%add(pt, ps, transpose(outer))
+      end if
+    end subroutine add_product
+  end subroutine init
+
+  !> x = (G G^T)^{-1} b for local coarse blocks b (6*nlocal); x may alias b's
+  !> storage only through separate actual arguments. Collective.
+  subroutine solve(this, b, x)
+    class(coarse_problem_t), intent(inout) :: this
+    real(dp), intent(in) :: b(:)
+    real(dp), intent(out) :: x(:)
+    integer :: ierr, rank
+    call MPI_Comm_rank(this%comm, rank, ierr)
+    call MPI_Gatherv(b, 6*this%layout%nlocal, MPI_REAL_DP, this%rhs, this%layout%counts, this%layout%displs, &
+                     MPI_REAL_DP, 0, this%comm, ierr)
+    call this%mumps%solve(this%rhs)
+    call MPI_Scatterv(this%rhs, this%layout%counts, this%layout%displs, MPI_REAL_DP, x, &
+                      6*this%layout%nlocal, MPI_REAL_DP, 0, this%comm, ierr)
+  end subroutine solve
+
+  subroutine free(this)
+    class(coarse_problem_t), intent(inout) :: this
+    if (this%factorized) call this%mumps%free()
+    this%factorized = .false.
+    if (allocated(this%rhs)) deallocate (this%rhs)
+  end subroutine free
+
+end module coarse_problem

@@ -1,0 +1,388 @@
+!> The constraint matrix B = [B_E; B_I] and its right-hand side c, built from
+!> node sharing, distributed by rows (multipliers).
+!>
+!> Rows, per physical node and displacement component:
+!> - Dirichlet (top face, symmetry planes): one row per subdomain copy,
+!>   B = e_dof, c = prescribed value. Every copy gets its own row, so such a
+!>   component needs no gluing, and all these rows are orthonormal.
+!> - gluing, for a component that is not Dirichlet and a node with m > 1
+!>   copies (sorted subdomain ids s_1 < ... < s_m): the m-1 non-redundant,
+!>   orthonormal Helmert rows, row k = (1,...,1,-k,0,...)/sqrt(k(k+1)) on the
+!>   copies 1..k+1. Non-redundant so that B has full row rank; orthonormal so
+!>   that B_E B_E^T = I also where 4 or 8 subdomains meet.
+!> - contact, component z of a node of the face z = 0 under the obstacle's
+!>   footprint: one row on the copy in s_1, B = -e_z, c = g = z - psi(x, y)
+!>   (-u_z <= g, multiplier >= 0).
+!> Top Dirichlet takes precedence over symmetry on shared edges.
+!>
+!> Every row has a canonical 64-bit key (node, component, kind, index) that
+!> does not depend on the number of ranks, and one owner: the rank of the
+!> subdomain the row is attached to (s_1 for gluing and contact rows). Owned
+!> rows are stored in key order; ghost rows (owned elsewhere, touching this
+!> rank's subdomains) follow, grouped by owner and in key order, which is the
+!> order in which owner and user exchange them (see dual_exchange).
+module constraints
+  use kinds, only: dp, ip, i8, MPI_INT_IP
+  use errors, only: fatal_error
+  use params, only: params_t
+  use decomposition, only: decomposition_t
+  use subdomain, only: subdomain_t
+  use key_sort, only: sort_permutation
+  use dual_exchange, only: dual_exchange_t
+  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Allreduce, MPI_Exscan, MPI_SUM
+  implicit none
+  private
+
+  public :: build_constraints, row_key
+
+  integer(ip), parameter, public :: row_gluing = 0, row_dirichlet = 1, row_contact = 2
+
+  !> B^s of one local subdomain as a list of entries; `g(:, e)` holds the
+  !> matching entries of G^T = B R: val * R^s(dof, :).
+  type, public :: subdomain_rows_t
+    integer(ip) :: nentries = 0
+    integer(ip), allocatable :: row(:)     !< local row index (1..n_local)
+    integer(ip), allocatable :: dof(:)     !< subdomain dof
+    integer(ip), allocatable :: slot(:)    !< position of this subdomain in the node's copy list
+    real(dp), allocatable :: val(:)
+    real(dp), allocatable :: g(:, :)       !< (6, nentries), filled by feti_operators
+  end type subdomain_rows_t
+
+  type, public :: constraints_t
+    type(MPI_Comm) :: comm
+    integer(ip) :: n_own = 0, n_ghost = 0, n_local = 0
+    integer(ip) :: n_global = 0, offset = 0            !< global id of owned row i: offset + i
+    integer(ip) :: n_contact = 0, n_contact_global = 0 !< contact rows owned / in all
+    integer(ip) :: n_dirichlet_global = 0, n_gluing_global = 0
+    integer(i8), allocatable :: key(:)        !< (n_local) canonical keys
+    integer(ip), allocatable :: kind(:)       !< (n_own) row_gluing | row_dirichlet | row_contact
+    real(dp), allocatable :: c(:)             !< (n_own) right-hand side
+    integer(ip), allocatable :: node(:)       !< (n_own) node gid
+    integer(ip), allocatable :: row_sub(:)    !< (n_own) local subdomain index of the row's copy (s_1)
+    integer(ip), allocatable :: row_node(:)   !< (n_own) local node number in that subdomain
+    type(subdomain_rows_t), allocatable :: b(:)  !< (number of local subdomains)
+    type(dual_exchange_t) :: exchange
+  end type constraints_t
+
+  !> One entry of B found while visiting the subdomains' nodes.
+  type :: record_t
+    integer(i8) :: key
+    integer :: owner
+    integer(ip) :: sub, dof, node, gid, kind, slot
+    real(dp) :: val, c
+  end type record_t
+
+contains
+
+  !> Canonical key of a row: node gid, component 1..3, kind, index 1..8.
+  pure integer(i8) function row_key(gid, comp, kind, index)
+    integer(ip), intent(in) :: gid, comp, kind, index
+    row_key = ((int(gid, i8)*3 + (comp - 1))*4 + kind)*8 + (index - 1)
+  end function row_key
+
+  !> Build B, c and the exchange pattern for the local subdomains `subs`
+  !> (geometry only is needed). Collective over `comm`.
+  subroutine build_constraints(p, dec, subs, comm, con)
+    type(params_t), intent(in) :: p
+    type(decomposition_t), intent(in) :: dec
+    type(subdomain_t), intent(in) :: subs(:)
+    type(MPI_Comm), intent(in) :: comm
+    type(constraints_t), intent(out) :: con
+    type(record_t), allocatable :: rec(:)
+    integer(ip) :: nrec, i, j, r, nrows, ls, me
+    integer(ip), allocatable :: perm(:), row_of_rec(:), ghost_perm(:), ghost_owner(:), local_index(:)
+    integer(i8), allocatable :: keys(:)
+    integer(i8) :: last
+    integer :: ierr, rank
+    integer(ip), allocatable :: urow_first(:)   ! first record (in sorted order) of each unique row
+    integer(ip) :: n_ghost, counts(4), totals(4)
+
+    con%comm = comm
+    call MPI_Comm_rank(comm, rank, ierr)
+    me = rank
+
+    ! 1. Records of every B entry of the local subdomains (count, then fill).
+    nrec = 0
+    call visit(.false.)
+    allocate (rec(nrec))
+    nrec = 0
+    call visit(.true.)
+
+    ! 2. Unique rows in key order.
+    allocate (keys(nrec))
+    keys = rec(:)%key
+    call sort_permutation(keys, perm)
+    allocate (row_of_rec(nrec), urow_first(nrec))
+    nrows = 0
+    last = -1
+    do i = 1, nrec
+      r = perm(i)
+      if (rec(r)%key /= last) then
+        nrows = nrows + 1
+        urow_first(nrows) = r
+        last = rec(r)%key
+      end if
+      row_of_rec(r) = nrows
+    end do
+
+    ! 3. Owned rows first (key order), then ghosts by (owner, key).
+    allocate (local_index(nrows))
+    con%n_own = count(rec(urow_first(1:nrows))%owner == me)
+    n_ghost = nrows - con%n_own
+    allocate (ghost_owner(n_ghost))
+    j = 0
+    i = 0
+    do r = 1, nrows
+      if (rec(urow_first(r))%owner == me) then
+        j = j + 1
+        local_index(r) = j
+      else
+        i = i + 1
+        ghost_owner(i) = rec(urow_first(r))%owner
+      end if
+    end do
+    call sort_permutation(ghost_owner, ghost_perm)    ! stable: key order kept within an owner
+    block
+      integer(ip), allocatable :: ghost_rows(:)
+      allocate (ghost_rows(n_ghost))
+      i = 0
+      do r = 1, nrows
+        if (rec(urow_first(r))%owner /= me) then
+          i = i + 1
+          ghost_rows(i) = r
+        end if
+      end do
+      do i = 1, n_ghost
+        local_index(ghost_rows(ghost_perm(i))) = con%n_own + i
+      end do
+    end block
+    con%n_ghost = n_ghost
+    con%n_local = con%n_own + n_ghost
+
+    allocate (con%key(con%n_local), con%kind(con%n_own), con%c(con%n_own), con%node(con%n_own), &
+              con%row_sub(con%n_own), con%row_node(con%n_own))
+    do r = 1, nrows
+      associate (first => rec(urow_first(r)))
+        con%key(local_index(r)) = first%key
+        if (local_index(r) <= con%n_own) then
+          con%kind(local_index(r)) = first%kind
+          con%c(local_index(r)) = first%c
+          con%node(local_index(r)) = first%gid
+        end if
+      end associate
+    end do
+    ! the owner's copy of each owned row (s_1, or the Dirichlet copy): for contact output
+    do i = 1, nrec
+      j = local_index(row_of_rec(i))
+      if (j > con%n_own) cycle
+      if (rec(i)%kind == row_dirichlet .or. rec(i)%slot == 1) then
+        con%row_sub(j) = rec(i)%sub
+        con%row_node(j) = rec(i)%node
+      end if
+    end do
+
+    ! 4. B^s entries per local subdomain.
+    allocate (con%b(size(subs)))
+    do ls = 1, size(subs, kind=ip)
+      con%b(ls)%nentries = count(rec(:)%sub == ls)
+      allocate (con%b(ls)%row(con%b(ls)%nentries), con%b(ls)%dof(con%b(ls)%nentries), &
+                con%b(ls)%val(con%b(ls)%nentries), con%b(ls)%g(6, con%b(ls)%nentries), &
+                con%b(ls)%slot(con%b(ls)%nentries))
+      con%b(ls)%nentries = 0
+    end do
+    do i = 1, nrec
+      associate (bs => con%b(rec(i)%sub))
+        bs%nentries = bs%nentries + 1
+        bs%row(bs%nentries) = local_index(row_of_rec(i))
+        bs%dof(bs%nentries) = rec(i)%dof
+        bs%val(bs%nentries) = rec(i)%val
+        bs%slot(bs%nentries) = rec(i)%slot
+        bs%g(:, bs%nentries) = 0
+      end associate
+    end do
+
+    ! 5. Sizes.
+    call MPI_Exscan(con%n_own, con%offset, 1, MPI_INT_IP, MPI_SUM, comm, ierr)
+    if (rank == 0) con%offset = 0
+    con%n_contact = count(con%kind == row_contact)
+    counts = [con%n_own, con%n_contact, count(con%kind == row_dirichlet, kind=ip), &
+              count(con%kind == row_gluing, kind=ip)]
+    call MPI_Allreduce(counts, totals, 4, MPI_INT_IP, MPI_SUM, comm, ierr)
+    con%n_global = totals(1)
+    con%n_contact_global = totals(2)
+    con%n_dirichlet_global = totals(3)
+    con%n_gluing_global = totals(4)
+
+    ! 6. Exchange pattern.
+    call build_exchange(dec, con, ghost_owner(ghost_perm), me)
+
+  contains
+
+    !> Visit every node of every local subdomain and emit its B entries.
+    subroutine visit(fill)
+      logical, intent(in) :: fill
+      integer(ip) :: copies(8)
+      integer(ip) :: ls, a, gid, comp, m, j, k, ijk(3), s_id
+      logical :: dirichlet(3), contact
+      real(dp) :: value(3), x(3), gap
+      do ls = 1, size(subs, kind=ip)
+        s_id = subs(ls)%id
+        do a = 1, subs(ls)%nnodes
+          gid = subs(ls)%node_gid(a)
+          ijk = dec%mesh%node_ijk(gid)
+          x = subs(ls)%coords(:, a)
+          call node_conditions(p, dec, ijk, x, dirichlet, value, contact, gap)
+          call dec%node_subdomain_list(gid, copies, m)
+          if (m == 1 .and. .not. (any(dirichlet) .or. contact)) cycle
+          j = findloc(copies(1:m), s_id, 1)
+          do comp = 1, 3
+            if (dirichlet(comp)) then
+              call emit(row_key(gid, comp, row_dirichlet, j), int(me), ls, 3*(a - 1) + comp, a, gid, &
+                        row_dirichlet, 1.0_dp, value(comp))
+            else
+              do k = max(1, j - 1), m - 1
+                if (j <= k) then
+                  call emit(row_key(gid, comp, row_gluing, k), rank_of(copies(1)), ls, 3*(a - 1) + comp, a, &
+                            gid, row_gluing, 1/sqrt(real(k*(k + 1), dp)), 0.0_dp)
+                else if (j == k + 1) then
+                  call emit(row_key(gid, comp, row_gluing, k), rank_of(copies(1)), ls, 3*(a - 1) + comp, a, &
+                            gid, row_gluing, -k/sqrt(real(k*(k + 1), dp)), 0.0_dp)
+                end if
+              end do
+            end if
+          end do
+          if (contact .and. j == 1) then
+            call emit(row_key(gid, 3_ip, row_contact, 1_ip), int(me), ls, 3*(a - 1) + 3, a, gid, &
+                      row_contact, -1.0_dp, gap)
+          end if
+        end do
+      end do
+    contains
+      subroutine emit(key, owner, ls, dof, node, gid, kind, val, c)
+        integer(i8), intent(in) :: key
+        integer, intent(in) :: owner
+        integer(ip), intent(in) :: ls, dof, node, gid, kind
+        real(dp), intent(in) :: val, c
+        nrec = nrec + 1
+        if (fill) rec(nrec) = record_t(key, owner, ls, dof, node, gid, kind, j, val, c)
+      end subroutine emit
+      integer function rank_of(s)
+        integer(ip), intent(in) :: s
+        rank_of = dec%subdomain_rank(s)
+      end function rank_of
+    end subroutine visit
+  end subroutine build_constraints
+
+  !> Dirichlet components with values, and the contact condition, of a node.
+  subroutine node_conditions(p, dec, ijk, x, dirichlet, value, contact, gap)
+    type(params_t), intent(in) :: p
+    type(decomposition_t), intent(in) :: dec
+    integer(ip), intent(in) :: ijk(3)
+    real(dp), intent(in) :: x(3)
+    logical, intent(out) :: dirichlet(3), contact
+    real(dp), intent(out) :: value(3), gap
+    real(dp) :: r2, psi, lx, ly
+
+    dirichlet = .false.
+    value = 0
+    if (p%boundary%symmetry_x0 .and. ijk(1) == 0) dirichlet(1) = .true.
+    if (p%boundary%symmetry_y0 .and. ijk(2) == 0) dirichlet(2) = .true.
+    if (p%boundary%top_dirichlet .and. ijk(3) == dec%mesh%ng(3)) then
+      dirichlet = .true.
+      value = p%boundary%top_displacement
+    end if
+    contact = .false.
+    gap = 0
+    if (ijk(3) /= 0 .or. dirichlet(3)) return
+    lx = dec%mesh%lengths(1)
+    ly = dec%mesh%lengths(2)
+    select case (p%obstacle%shape)
+    case ('plane')
+      contact = .true.
+      psi = -p%obstacle%gap
+    case ('sphere')
+      r2 = (x(1) - lx/2)**2 + (x(2) - ly/2)**2
+      if (r2 > p%obstacle%radius**2) return
+      contact = .true.
+      psi = -p%obstacle%radius - p%obstacle%gap + sqrt(p%obstacle%radius**2 - r2)
+    case default
+      return
+    end select
+    gap = x(3) - psi
+  end subroutine node_conditions
+
+  !> The neighbour exchange: ghosts are received from their owners in the
+  !> order of `ghost_owner`; owned gluing rows are sent to every other rank
+  !> holding one of their copies, in key order.
+  subroutine build_exchange(dec, con, ghost_owner, me)
+    type(decomposition_t), intent(in) :: dec
+    type(constraints_t), intent(inout) :: con
+    integer(ip), intent(in) :: ghost_owner(:)   ! owner of ghost i (local row n_own+i)
+    integer(ip), intent(in) :: me
+    integer(ip) :: copies(8), ncopies
+    integer(ip), allocatable :: dest_rank(:), dest_row(:), perm(:), send_index(:), recv_index(:)
+    integer, allocatable :: nbrs(:), send_counts(:), recv_counts(:), ranks_here(:)
+    integer(ip) :: i, k, n, index, q
+    integer :: nr, t
+
+    ! (destination rank, owned row) pairs, in row (= key) order
+    allocate (dest_rank(16*con%n_own + 1), dest_row(16*con%n_own + 1))
+    n = 0
+    do i = 1, con%n_own
+      if (con%kind(i) /= row_gluing) cycle
+      index = int(mod(con%key(i), 8_i8), ip) + 1
+      call dec%node_subdomain_list(con%node(i), copies, ncopies)
+      ranks_here = [(dec%subdomain_rank(copies(k)), k = 1, index + 1)]
+      do k = 1, size(ranks_here)
+        if (ranks_here(k) == me) cycle
+        if (any(ranks_here(1:k - 1) == ranks_here(k))) cycle
+        if (n == size(dest_rank)) then
+          dest_rank = [dest_rank, dest_rank]
+          dest_row = [dest_row, dest_row]
+        end if
+        n = n + 1
+        dest_rank(n) = ranks_here(k)
+        dest_row(n) = i
+      end do
+    end do
+    call sort_permutation(dest_rank(1:n), perm)     ! stable: row order kept per rank
+    send_index = dest_row(perm)
+
+    ! neighbours: union of destination ranks and ghost owners
+    nbrs = [integer ::]
+    do i = 1, n
+      if (.not. any(nbrs == dest_rank(i))) nbrs = [nbrs, int(dest_rank(i))]
+    end do
+    do i = 1, size(ghost_owner)
+      if (.not. any(nbrs == ghost_owner(i))) nbrs = [nbrs, int(ghost_owner(i))]
+    end do
+    call sort_ints(nbrs)
+    nr = size(nbrs)
+    allocate (send_counts(nr), recv_counts(nr))
+    do t = 1, nr
+      q = nbrs(t)
+      send_counts(t) = count(dest_rank(1:n) == q)
+      recv_counts(t) = count(ghost_owner == q)
+    end do
+    recv_index = [(con%n_own + i, i = 1, size(ghost_owner, kind=ip))]
+    ! ghosts are grouped by owner in ascending owner order, as nbrs is
+    if (sum(recv_counts) /= size(ghost_owner)) call fatal_error('constraints: ghost rows without a neighbour')
+    call con%exchange%init(con%comm, con%n_own, con%n_local, nbrs, send_counts, send_index, &
+                           recv_counts, recv_index)
+  end subroutine build_exchange
+
+  subroutine sort_ints(v)
+    integer, intent(inout) :: v(:)
+    integer :: i, j, t
+    do i = 2, size(v)
+      t = v(i)
+      j = i - 1
+      do while (j >= 1)
+        if (v(j) <= t) exit
+        v(j + 1) = v(j)
+        j = j - 1
+      end do
+      v(j + 1) = t
+    end do
+  end subroutine sort_ints
+end module constraints

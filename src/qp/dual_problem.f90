@@ -1,0 +1,108 @@
+!> The TFETI dual contact problem of the paper, Eq. (8), as a QP:
+!>
+!>   min 1/2 nu^T (P F P + rho Q) nu - nu^T P (d - F lambda~)
+!>   s.t. nu_I >= -lambda~_I  and  G~ nu = o,  G~ = L^{-1} G,  G G^T = L L^T,
+!>
+!> with lambda = nu + lambda~. The equality constraint is given in "hat" form
+!> (see qp_problem): z = (G G^T)^{-1} G nu, ||G~ nu||^2 = (G nu)^T z and
+!> G~^T mu = G^T muhat with muhat = L^{-T} mu, so the factor L is never needed.
+!> The multiplier vector is distributed like the coarse vectors (the 6-blocks
+!> of this rank's subdomains); SMALBE only scales and adds it.
+module dual_problem
+  use kinds, only: dp, ip, MPI_REAL_DP
+  use errors, only: fatal_error
+  use qp_problem, only: qp_problem_t, no_lower_bound
+  use feti_operators, only: feti_t
+  use mpi_f08, only: MPI_Allreduce, MPI_SUM
+  implicit none
+  private
+
+  type, extends(qp_problem_t), public :: dual_problem_t
+    type(feti_t), pointer :: op => null()
+    real(dp) :: rho = 0                       !< penalty (regularization) of Eq. (8)
+    real(dp), allocatable, private :: px(:), fpx(:), pfpx(:), gz(:), cz(:)
+  contains
+    procedure :: init
+    procedure :: hessian
+    procedure :: penalty
+    procedure :: eq_size
+    procedure :: eq_residual
+    procedure :: eq_apply_t
+    procedure :: free
+  end type dual_problem_t
+
+contains
+
+  !> The problem of `op` (set up) with rho = rho_scale * ||P F P||.
+  subroutine init(this, op, rho_scale)
+    class(dual_problem_t), intent(inout) :: this
+    type(feti_t), intent(inout), target :: op
+    real(dp), intent(in) :: rho_scale
+    integer(ip) :: n
+    call this%free()
+    this%op => op
+    n = op%con%n_own
+    call this%init_base(op%comm, n)
+    this%has_equality = .true.
+    this%rho = rho_scale*op%norm_pfp
+    if (.not. this%rho > 0) call fatal_error('dual_problem: ||P F P|| estimate is not positive')
+    allocate (this%px(n), this%fpx(n), this%pfpx(n), this%gz(6*op%nlocal), this%cz(6*op%nlocal))
+    ! b = P (d - F lambda~)
+    call op%apply_f(op%lambda_tilde, this%fpx)
+    this%fpx = op%d - this%fpx
+    call op%project(this%fpx, this%b)
+    this%lower = merge(op%lower, no_lower_bound, op%is_contact)
+  end subroutine init
+
+  !> y = P F P x + rho Q x, with Q x = x - P x.
+  subroutine hessian(self, x, y)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(out) :: y(:)
+    call self%op%project(x, self%px)
+    call self%op%apply_f(self%px, self%fpx)
+    call self%op%project(self%fpx, self%pfpx)
+    y = self%pfpx + self%rho*(x - self%px)
+  end subroutine hessian
+
+  real(dp) function penalty(self)
+    class(dual_problem_t), intent(in) :: self
+    penalty = self%rho
+  end function penalty
+
+  !> Length of this rank's part of the multiplier: 6 per local subdomain.
+  integer(ip) function eq_size(self)
+    class(dual_problem_t), intent(in) :: self
+    eq_size = 6*self%op%nlocal
+  end function eq_size
+
+  !> z = (G G^T)^{-1} G x and cnorm = ||G~ x|| = sqrt((G x)^T z).
+  subroutine eq_residual(self, x, z, cnorm)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(out) :: z(:)
+    real(dp), intent(out) :: cnorm
+    real(dp) :: mine, total
+    integer :: ierr
+    call self%op%apply_g(x, self%gz)
+    call self%op%coarse_solve(self%gz, z)
+    mine = dot_product(self%gz, z)
+    call MPI_Allreduce(mine, total, 1, MPI_REAL_DP, MPI_SUM, self%comm, ierr)
+    cnorm = sqrt(max(total, 0.0_dp))
+  end subroutine eq_residual
+
+  !> y = G~^T mu = G^T muhat.
+  subroutine eq_apply_t(self, muhat, y)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: muhat(:)
+    real(dp), intent(out) :: y(:)
+    call self%op%apply_gt(muhat, y)
+  end subroutine eq_apply_t
+
+  subroutine free(this)
+    class(dual_problem_t), intent(inout) :: this
+    call this%free_base()
+    if (allocated(this%px)) deallocate (this%px, this%fpx, this%pfpx, this%gz, this%cz)
+    this%op => null()
+  end subroutine free
+end module dual_problem

@@ -1,0 +1,120 @@
+!> The KKT conditions of the primal contact problem (CASES.md), checked on the
+!> reconstructed displacements u and the multipliers lambda; each residual is
+!> relative to the size of the terms it is made of:
+!> - equilibrium:      ||K u - f + B^T lambda|| / max(||K u||, ||f||, ||B^T lambda||)
+!> - equality:         ||B_E u - c_E|| / max(||c_E||, || |B_E| |u| ||)
+!> - feasibility:      ||max(B_I u - c_I, 0)|| / max(||c_I||, || |B_I| |u| ||)
+!> - dual_feasibility: ||min(lambda_I, 0)|| / ||lambda_I||
+!> - complementarity:  sum |lambda_i (B_i u - c_i)| / (||lambda_I|| max(||c_I||, || |B_I| |u| ||))
+!> (norms over all subdomains and rows of all ranks; 0/0 counts as 0).
+module kkt
+  use kinds, only: dp, ip, MPI_REAL_DP
+  use feti_operators, only: feti_t, local_field_t
+  use mpi_f08, only: MPI_Allreduce, MPI_SUM
+  implicit none
+  private
+
+  public :: check_kkt
+
+  type, public :: kkt_residuals_t
+    real(dp) :: equilibrium = 0, equality = 0, feasibility = 0, dual_feasibility = 0, complementarity = 0
+  contains
+    procedure :: worst
+  end type kkt_residuals_t
+
+contains
+
+  !> The largest of the five residuals.
+  real(dp) function worst(this)
+    class(kkt_residuals_t), intent(in) :: this
+    worst = max(this%equilibrium, this%equality, this%feasibility, this%dual_feasibility, &
+                this%complementarity)
+  end function worst
+
+  !> Residuals of (u, lambda). Collective.
+  function check_kkt(op, u, lambda) result(res)
+    type(feti_t), intent(inout) :: op
+    type(local_field_t), intent(in) :: u(:)
+    real(dp), intent(in) :: lambda(:)
+    type(kkt_residuals_t) :: res
+    type(local_field_t), allocatable :: btl(:), absu(:)
+    real(dp), allocatable :: ku(:), bu(:), babs(:), r(:)
+    real(dp) :: s(16)
+    integer(ip) :: ls, n
+    integer :: ierr
+
+    n = op%con%n_own
+    allocate (btl(op%nlocal), absu(op%nlocal), bu(n), babs(n), r(n))
+    call op%apply_bt(lambda, btl)
+    s = 0
+    do ls = 1, op%nlocal
+      associate (sub => op%subs(ls))
+        allocate (ku(sub%ndof))
+        call sub%K%matvec(u(ls)%v, ku)
+        s(1) = s(1) + sum((ku - sub%f + btl(ls)%v)**2)
+        s(2) = s(2) + sum(ku**2)
+        s(3) = s(3) + sum(sub%f**2)
+        s(4) = s(4) + sum(btl(ls)%v**2)
+        deallocate (ku)
+        absu(ls)%v = abs(u(ls)%v)
+      end associate
+    end do
+    call op%apply_b(u, bu)
+    call apply_abs_b(op, absu, babs)
+    r = bu - op%con%c
+    associate (contact => op%is_contact)
+      s(5) = sum(r**2, mask=.not. contact)
+      s(6) = sum(op%con%c**2, mask=.not. contact)
+      s(7) = sum(babs**2, mask=.not. contact)
+      s(8) = sum(max(r, 0.0_dp)**2, mask=contact)
+      s(9) = sum(op%con%c**2, mask=contact)
+      s(10) = sum(babs**2, mask=contact)
+      s(11) = sum(min(lambda, 0.0_dp)**2, mask=contact)
+      s(12) = sum(lambda**2, mask=contact)
+      s(13) = sum(abs(lambda*r), mask=contact)
+    end associate
+    call sum_all(op, s)
+    res%equilibrium = ratio(sqrt(s(1)), sqrt(max(s(2), s(3), s(4))))
+    res%equality = ratio(sqrt(s(5)), sqrt(max(s(6), s(7))))
+    res%feasibility = ratio(sqrt(s(8)), sqrt(max(s(9), s(10))))
+    res%dual_feasibility = ratio(sqrt(s(11)), sqrt(s(12)))
+    res%complementarity = ratio(s(13), sqrt(s(12))*sqrt(max(s(9), s(10))))
+  end function check_kkt
+
+  pure real(dp) function ratio(a, b)
+    real(dp), intent(in) :: a, b
+    if (b > 0) then
+      ratio = a/b
+    else
+      ratio = merge(0.0_dp, huge(1.0_dp), a == 0)
+    end if
+  end function ratio
+
+  subroutine sum_all(op, s)
+    type(feti_t), intent(in) :: op
+    real(dp), intent(inout) :: s(:)
+    real(dp) :: total(size(s))
+    integer :: ierr
+    call MPI_Allreduce(s, total, size(s), MPI_REAL_DP, MPI_SUM, op%comm, ierr)
+    s = total
+  end subroutine sum_all
+
+  !> y = |B| |u|: the size of the terms of each row of B u.
+  subroutine apply_abs_b(op, absu, y)
+    type(feti_t), intent(inout) :: op
+    type(local_field_t), intent(in) :: absu(:)
+    real(dp), intent(inout) :: y(:)
+    real(dp), allocatable :: loc(:)
+    integer(ip) :: ls, e
+    allocate (loc(op%con%n_local))
+    loc = 0
+    do ls = 1, op%nlocal
+      associate (bs => op%con%b(ls))
+        do e = 1, bs%nentries
+          loc(bs%row(e)) = loc(bs%row(e)) + abs(bs%val(e))*absu(ls)%v(bs%dof(e))
+        end do
+      end associate
+    end do
+    call op%con%exchange%scatter_add(loc, y)
+  end subroutine apply_abs_b
+end module kkt

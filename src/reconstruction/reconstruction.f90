@@ -1,0 +1,119 @@
+!> Reconstruction of the displacements from the multipliers, the inverse step
+!> of the dualization (paper Eq. 9):
+!>
+!>   u = K^+ (f - B^T lambda) + R alpha_bar.
+!>
+!> The rigid body amplitudes alpha_bar by two formulas (DESIGN.md, with a
+!> right-hand side c; g = F lambda - d is the dual gradient):
+!> - new (Eq. 14 + 24): alpha = (G G^T)^{-1} G g with the coarse factorization
+!>   already at hand, then alpha_bar = alpha - muhat, muhat = L^{-T} mu the
+!>   SMALBE multiplier in hat form: one coarse solve and a vector subtraction;
+!> - standard (Eq. 10): A = equality rows + contact rows with lambda_i >
+!>   active_tol * max(lambda_I); G_A G_A^T assembled anew (distributed) and
+!>   factorized by MUMPS, alpha_bar = (G_A G_A^T)^{-1} G_A g_A.
+!> Timers 'rec new' and 'rec standard'; the standard formula's parts are
+!> returned in standard_cost_t (assembly, factorization, solve).
+module reconstruction
+  use kinds, only: dp, ip, MPI_REAL_DP, MPI_INT_IP
+  use timers, only: timer_start, timer_stop
+  use feti_operators, only: feti_t, local_field_t
+  use coarse_problem, only: coarse_problem_t
+  use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_Wtime
+  implicit none
+  private
+
+  public :: dual_gradient, alpha_new, alpha_standard, active_contact_mask, coarse_vector_norm
+
+  !> Seconds of the parts of the standard formula on this rank.
+  type, public :: standard_cost_t
+    real(dp) :: assembly = 0, factorization = 0, solve = 0, total = 0
+    integer(ip) :: active_rows = 0         !< active contact rows in all
+  end type standard_cost_t
+
+contains
+
+  !> g = F lambda - d (owned rows). SMALBE has it at hand at its end; it is
+  !> computed here once and shared by both formulas.
+  subroutine dual_gradient(op, lambda, g)
+    type(feti_t), intent(inout) :: op
+    real(dp), intent(in) :: lambda(:)
+    real(dp), intent(out) :: g(:)
+    call op%apply_f(lambda, g)
+    g = g - op%d
+  end subroutine dual_gradient
+
+  !> alpha_bar = (G G^T)^{-1} G g - muhat (Eq. 14 and 24).
+  subroutine alpha_new(op, g, muhat, alpha_bar)
+    type(feti_t), intent(inout) :: op
+    real(dp), intent(in) :: g(:), muhat(:)
+    real(dp), intent(out) :: alpha_bar(:)
+    real(dp), allocatable :: gz(:)
+    call timer_start('rec new')
+    allocate (gz(6*op%nlocal))
+    call op%apply_g(g, gz)
+    call op%coarse_solve(gz, alpha_bar)
+    alpha_bar = alpha_bar - muhat
+    call timer_stop('rec new')
+  end subroutine alpha_new
+
+  !> The rows of A: every equality row, and the contact rows whose multiplier
+  !> exceeds active_tol times the largest contact multiplier.
+  subroutine active_contact_mask(op, lambda, active_tol, mask, nactive_contact)
+    type(feti_t), intent(inout) :: op
+    real(dp), intent(in) :: lambda(:)
+    real(dp), intent(in) :: active_tol
+    logical, intent(out) :: mask(:)
+    integer(ip), intent(out) :: nactive_contact
+    real(dp) :: mine, biggest, threshold
+    integer(ip) :: local
+    integer :: ierr
+    mine = 0
+    if (any(op%is_contact)) mine = maxval(lambda, mask=op%is_contact)
+    call MPI_Allreduce(mine, biggest, 1, MPI_REAL_DP, MPI_MAX, op%comm, ierr)
+    threshold = active_tol*max(biggest, 0.0_dp)
+    mask = (.not. op%is_contact) .or. (lambda > threshold .and. lambda > 0)
+    local = count(op%is_contact .and. mask, kind=ip)
+    call MPI_Allreduce(local, nactive_contact, 1, MPI_INT_IP, MPI_SUM, op%comm, ierr)
+  end subroutine active_contact_mask
+
+  !> alpha_bar = (G_A G_A^T)^{-1} G_A g_A (Eq. 10), assembling and factorizing
+  !> G_A G_A^T as a conventional code does. The new matrix is freed again.
+  subroutine alpha_standard(op, lambda, g, active_tol, alpha_bar, cost)
+    type(feti_t), intent(inout) :: op
+    real(dp), intent(in) :: lambda(:), g(:)
+    real(dp), intent(in) :: active_tol
+    real(dp), intent(out) :: alpha_bar(:)
+    type(standard_cost_t), intent(out) :: cost
+    logical, allocatable :: mask(:)
+    real(dp), allocatable :: ga(:), gz(:)
+    type(coarse_problem_t) :: active_cp
+    real(dp) :: t0
+
+    call timer_start('rec standard')
+    allocate (mask(op%con%n_own), ga(op%con%n_own), gz(6*op%nlocal))
+    t0 = MPI_Wtime()
+    call active_contact_mask(op, lambda, active_tol, mask, cost%active_rows)
+    call active_cp%init(op%dec, op%con, op%layout, op%comm, mask)
+    cost%factorization = active_cp%seconds_factorization
+    cost%assembly = MPI_Wtime() - t0 - cost%factorization
+    t0 = MPI_Wtime()
+    ga = merge(g, 0.0_dp, mask)
+    call op%apply_g(ga, gz)
+    call active_cp%solve(gz, alpha_bar)
+    cost%solve = MPI_Wtime() - t0
+    call active_cp%free()
+    call timer_stop('rec standard')
+    cost%total = cost%assembly + cost%factorization + cost%solve
+  end subroutine alpha_standard
+
+  !> Global 2-norm of a vector of local coarse blocks.
+  real(dp) function coarse_vector_norm(op, z)
+    type(feti_t), intent(in) :: op
+    real(dp), intent(in) :: z(:)
+    real(dp) :: mine
+    integer :: ierr
+    mine = sum(z**2)
+    call MPI_Allreduce(mine, coarse_vector_norm, 1, MPI_REAL_DP, MPI_SUM, op%comm, ierr)
+    coarse_vector_norm = sqrt(coarse_vector_norm)
+  end function coarse_vector_norm
+end module reconstruction

@@ -1,0 +1,94 @@
+!> Helpers shared by the FETI tests: parameter sets for small cases, and
+!> comparison of distributed dual vectors by their rank-independent keys.
+module feti_test_support
+  use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_I8
+  use params, only: params_t, default_params
+  use key_sort, only: sort_permutation
+  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gather, MPI_Gatherv, MPI_INTEGER
+  implicit none
+  private
+
+  public :: small_case, gather_keyed, coarse_norm
+
+contains
+
+  !> A small case: 'block' (symmetry, top pressure, plane contact) or 'cube'
+  !> (top Dirichlet, sphere) or 'linear' (top Dirichlet + symmetry, no contact).
+  function small_case(kind, nsub, nel, decomposition, distortion) result(p)
+    character(len=*), intent(in) :: kind, decomposition
+    integer(ip), intent(in) :: nsub(3), nel(3)
+    real(dp), intent(in) :: distortion
+    type(params_t) :: p
+    p = default_params()
+    p%mesh%nsub = nsub
+    p%mesh%nel = nel
+    p%mesh%decomposition = decomposition
+    p%mesh%distortion = distortion
+    select case (kind)
+    case ('block')
+      p%load%top_pressure = 100
+      p%boundary%top_dirichlet = .false.
+      p%boundary%symmetry_x0 = .true.
+      p%boundary%symmetry_y0 = .true.
+      p%obstacle%shape = 'plane'
+    case ('cube')
+      p%obstacle%shape = 'sphere'
+    case ('linear')
+      p%boundary%top_displacement = [0.001_dp, 0.0005_dp, -0.002_dp]
+      p%boundary%symmetry_x0 = .true.
+      p%boundary%symmetry_y0 = .true.
+      p%obstacle%shape = 'none'
+    end select
+  end function small_case
+
+  !> Gather (key, value) pairs of a distributed vector to rank 0 of `comm`,
+  !> sorted by key (on other ranks the results are empty).
+  subroutine gather_keyed(comm, keys, values, all_keys, all_values)
+    type(MPI_Comm), intent(in) :: comm
+    integer(i8), intent(in) :: keys(:)
+    real(dp), intent(in) :: values(:)
+    integer(i8), allocatable, intent(out) :: all_keys(:)
+    real(dp), allocatable, intent(out) :: all_values(:)
+    integer :: rank, nranks, ierr, n, r
+    integer, allocatable :: counts(:), displs(:)
+    integer(i8), allocatable :: k(:)
+    real(dp), allocatable :: v(:)
+    integer(ip), allocatable :: perm(:)
+
+    call MPI_Comm_rank(comm, rank, ierr)
+    call MPI_Comm_size(comm, nranks, ierr)
+    n = size(keys)
+    allocate (counts(nranks), displs(nranks))
+    call MPI_Gather(n, 1, MPI_INTEGER, counts, 1, MPI_INTEGER, 0, comm, ierr)
+    displs = 0
+    do r = 2, nranks
+      displs(r) = displs(r - 1) + counts(r - 1)
+    end do
+    if (rank == 0) then
+      allocate (k(sum(counts)), v(sum(counts)))
+    else
+      allocate (k(1), v(1))
+    end if
+    call MPI_Gatherv(keys, n, MPI_INT_I8, k, counts, displs, MPI_INT_I8, 0, comm, ierr)
+    call MPI_Gatherv(values, n, MPI_REAL_DP, v, counts, displs, MPI_REAL_DP, 0, comm, ierr)
+    if (rank == 0) then
+      call sort_permutation(k, perm)
+      all_keys = k(perm)
+      all_values = v(perm)
+    else
+      allocate (all_keys(0), all_values(0))
+    end if
+  end subroutine gather_keyed
+
+  !> Global 2-norm of a vector of local coarse blocks.
+  real(dp) function coarse_norm(comm, z)
+    use mpi_f08, only: MPI_Allreduce, MPI_SUM
+    type(MPI_Comm), intent(in) :: comm
+    real(dp), intent(in) :: z(:)
+    real(dp) :: mine, total
+    integer :: ierr
+    mine = sum(z**2)
+    call MPI_Allreduce(mine, total, 1, MPI_REAL_DP, MPI_SUM, comm, ierr)
+    coarse_norm = sqrt(total)
+  end function coarse_norm
+end module feti_test_support
