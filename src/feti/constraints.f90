@@ -96,6 +96,7 @@ contains
     integer :: ierr, rank
     integer(ip), allocatable :: urow_first(:)   ! first record (in sorted order) of each unique row
     integer(ip) :: n_ghost, counts(4), totals(4)
+    logical :: filling
 
     con%comm = comm
     call MPI_Comm_rank(comm, rank, ierr)
@@ -218,13 +219,16 @@ contains
 
   contains
 
-    !> Visit every node of every local subdomain and emit its B entries.
+    !> Visit every node of every local subdomain and emit its B entries
+    !> (count them when `fill` is false).
     subroutine visit(fill)
       logical, intent(in) :: fill
       integer(ip) :: copies(8)
       integer(ip) :: ls, a, gid, comp, m, j, k, ijk(3), s_id
+      integer :: owner
       logical :: dirichlet(3), contact
       real(dp) :: value(3), x(3), gap
+      filling = fill
       do ls = 1, size(subs, kind=ip)
         s_id = subs(ls)%id
         do a = 1, subs(ls)%nnodes
@@ -235,42 +239,39 @@ contains
           call dec%node_subdomain_list(gid, copies, m)
           if (m == 1 .and. .not. (any(dirichlet) .or. contact)) cycle
           j = findloc(copies(1:m), s_id, 1)
+          owner = dec%subdomain_rank(copies(1))
           do comp = 1, 3
             if (dirichlet(comp)) then
               call emit(row_key(gid, comp, row_dirichlet, j), int(me), ls, 3*(a - 1) + comp, a, gid, &
-                        row_dirichlet, 1.0_dp, value(comp))
+                        row_dirichlet, j, 1.0_dp, value(comp))
             else
               do k = max(1, j - 1), m - 1
                 if (j <= k) then
-                  call emit(row_key(gid, comp, row_gluing, k), rank_of(copies(1)), ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, 1/sqrt(real(k*(k + 1), dp)), 0.0_dp)
-                else if (j == k + 1) then
-                  call emit(row_key(gid, comp, row_gluing, k), rank_of(copies(1)), ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, -k/sqrt(real(k*(k + 1), dp)), 0.0_dp)
+                  call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
+                            gid, row_gluing, j, 1/sqrt(real(k*(k + 1), dp)), 0.0_dp)
+                else
+                  call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
+                            gid, row_gluing, j, -k/sqrt(real(k*(k + 1), dp)), 0.0_dp)
                 end if
               end do
             end if
           end do
           if (contact .and. j == 1) then
             call emit(row_key(gid, 3_ip, row_contact, 1_ip), int(me), ls, 3*(a - 1) + 3, a, gid, &
-                      row_contact, -1.0_dp, gap)
+                      row_contact, j, -1.0_dp, gap)
           end if
         end do
       end do
-    contains
-      subroutine emit(key, owner, ls, dof, node, gid, kind, val, c)
-        integer(i8), intent(in) :: key
-        integer, intent(in) :: owner
-        integer(ip), intent(in) :: ls, dof, node, gid, kind
-        real(dp), intent(in) :: val, c
-        nrec = nrec + 1
-        if (fill) rec(nrec) = record_t(key, owner, ls, dof, node, gid, kind, j, val, c)
-      end subroutine emit
-      integer function rank_of(s)
-        integer(ip), intent(in) :: s
-        rank_of = dec%subdomain_rank(s)
-      end function rank_of
     end subroutine visit
+
+    subroutine emit(key, owner, ls, dof, node, gid, kind, slot, val, c)
+      integer(i8), intent(in) :: key
+      integer, intent(in) :: owner
+      integer(ip), intent(in) :: ls, dof, node, gid, kind, slot
+      real(dp), intent(in) :: val, c
+      nrec = nrec + 1
+      if (filling) rec(nrec) = record_t(key, owner, ls, dof, node, gid, kind, slot, val, c)
+    end subroutine emit
   end subroutine build_constraints
 
   !> Dirichlet components with values, and the contact condition, of a node.

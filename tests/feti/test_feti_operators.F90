@@ -139,16 +139,16 @@ contains
       select case (what)
       case (1)
         call gather_keyed(op%comm, op%con%key(1:op%con%n_own), op%d, k1, v1)
-        if (rank == 0) call to_keyed(serial%d)
+        if (rank == 0) call gather_keyed(MPI_COMM_SELF, serial%con%key(1:serial%con%n_own), serial%d, k2, v2)
       case (2)
         call gather_keyed(op%comm, op%con%key(1:op%con%n_own), op%lambda_tilde, k1, v1)
-        if (rank == 0) call to_keyed(serial%lambda_tilde)
+        if (rank == 0) call gather_keyed(MPI_COMM_SELF, serial%con%key(1:serial%con%n_own), serial%lambda_tilde, k2, v2)
       case (3)
         call gather_keyed(op%comm, op%con%key(1:op%con%n_own), fx, k1, v1)
-        if (rank == 0) call to_keyed(sfx)
+        if (rank == 0) call gather_keyed(MPI_COMM_SELF, serial%con%key(1:serial%con%n_own), sfx, k2, v2)
       case (4)
         call gather_keyed(op%comm, op%con%key(1:op%con%n_own), px, k1, v1)
-        if (rank == 0) call to_keyed(spx)
+        if (rank == 0) call gather_keyed(MPI_COMM_SELF, serial%con%key(1:serial%con%n_own), spx, k2, v2)
       end select
       if (rank == 0) then
         call assert_true(size(k1) == size(k2), label//': same number of multipliers', HERE)
@@ -160,10 +160,5 @@ contains
       end if
     end do
     if (rank == 0) call serial%free()
-  contains
-    subroutine to_keyed(values)
-      real(dp), intent(in) :: values(:)
-      call gather_keyed(MPI_COMM_SELF, serial%con%key(1:serial%con%n_own), values, k2, v2)
-    end subroutine to_keyed
   end subroutine compare_with_one_rank
 end program test_feti_operators

@@ -1,0 +1,231 @@
+!> The linear system of one subdomain: material, stiffness K (CSR, full
+!> symmetric storage, columns ascending), load f, kernel basis R; and what the
+!> output needs from the element level (von Mises stress, tributary areas).
+module assembly
+  use kinds, only: dp, ip
+  use errors, only: fatal_error
+  use params, only: params_t
+  use box_mesh, only: face_z0, face_z1
+  use decomposition, only: decomposition_t
+  use subdomain, only: subdomain_t
+  use q1_element, only: q1_stiffness, q1_face_load, q1_face_shape_integrals, q1_centroid_stress, &
+                        von_mises, q1_face_nodes
+  use materials, only: subdomain_material
+  use rigid_modes, only: rigid_body_modes
+  implicit none
+  private
+
+  public :: assemble_subdomain, assemble_stiffness, add_face_traction, subdomain_von_mises, &
+            face_tributary_areas, element_displacements
+
+contains
+
+  !> Material, K, f (pressure p%load%top_pressure on z = Lz, pushing in -z)
+  !> and the orthonormal rigid body modes R (about sub%centroid) of `sub`,
+  !> whose geometry build_subdomain has filled.
+  subroutine assemble_subdomain(p, dec, sub)
+    type(params_t), intent(in) :: p
+    type(decomposition_t), intent(in) :: dec
+    type(subdomain_t), intent(inout) :: sub
+
+    call subdomain_material(p, dec, sub%id, sub%young, sub%poisson)
+    call assemble_stiffness(sub)
+    if (allocated(sub%f)) deallocate (sub%f)
+    allocate (sub%f(sub%ndof))
+    sub%f = 0
+    if (p%load%top_pressure /= 0) &
+      call add_face_traction(dec, sub, face_z1, [0.0_dp, 0.0_dp, -p%load%top_pressure], sub%f)
+    if (allocated(sub%R)) deallocate (sub%R)
+    allocate (sub%R(sub%ndof, 6))
+    call rigid_body_modes(sub%coords, sub%centroid, sub%R)
+  end subroutine assemble_subdomain
+
+  !> K of `sub` with its material (sub%young, sub%poisson). The pattern comes
+  !> from the node adjacency (nodes sharing an element, 3x3 blocks), so the
+  !> work is proportional to the number of elements.
+  subroutine assemble_stiffness(sub)
+    type(subdomain_t), intent(inout) :: sub
+    integer(ip), allocatable :: nptr(:), nelems(:), adjptr(:), adj(:), marker(:), tmp(:)
+    integer(ip) :: n, e, a, b, i, j, k, m, c, nadj, first, row, base, pos, ln(8)
+    real(dp) :: ke(24, 24), x(3, 8)
+
+    n = sub%nnodes
+    ! node -> elements
+    allocate (nptr(n + 1), nelems(8*sub%nelem))
+    nptr = 0
+    do e = 1, sub%nelem
+      do i = 1, 8
+        a = sub%elem_nodes(i, e)
+        nptr(a + 1) = nptr(a + 1) + 1
+      end do
+    end do
+    nptr(1) = 1
+    do a = 1, n
+      nptr(a + 1) = nptr(a + 1) + nptr(a)
+    end do
+    allocate (marker(n))
+    marker = nptr(1:n)
+    do e = 1, sub%nelem
+      do i = 1, 8
+        a = sub%elem_nodes(i, e)
+        nelems(marker(a)) = e
+        marker(a) = marker(a) + 1
+      end do
+    end do
+    ! node adjacency (including the node itself), ascending
+    allocate (adjptr(n + 1), adj(27*n))
+    marker = 0
+    nadj = 0
+    adjptr(1) = 1
+    do a = 1, n
+      first = nadj + 1
+      do k = nptr(a), nptr(a + 1) - 1
+        do i = 1, 8
+          b = sub%elem_nodes(i, nelems(k))
+          if (marker(b) == a) cycle
+          marker(b) = a
+          if (nadj == size(adj)) then
+            allocate (tmp(2*size(adj)))
+            tmp(1:nadj) = adj(1:nadj)
+            call move_alloc(tmp, adj)
+          end if
+          nadj = nadj + 1
+          adj(nadj) = b
+        end do
+      end do
+      call insertion_sort(adj(first:nadj))
+      adjptr(a + 1) = nadj + 1
+    end do
+    ! CSR pattern: row 3(a-1)+c holds columns 3(b-1)+1..3 for b adjacent to a
+    call sub%K%free()
+    sub%K%nrows = 3*n
+    sub%K%ncols = 3*n
+    allocate (sub%K%rowptr(3*n + 1), sub%K%colind(9*nadj), sub%K%values(9*nadj))
+    sub%K%rowptr(1) = 1
+    do a = 1, n
+      do c = 1, 3
+        row = 3*(a - 1) + c
+        base = sub%K%rowptr(row)
+        do k = adjptr(a), adjptr(a + 1) - 1
+          sub%K%colind(base:base + 2) = 3*(adj(k) - 1) + [1, 2, 3]
+          base = base + 3
+        end do
+        sub%K%rowptr(row + 1) = base
+      end do
+    end do
+    sub%K%values = 0
+    ! element matrices
+    do e = 1, sub%nelem
+      ln = sub%elem_nodes(:, e)
+      x = sub%coords(:, ln)
+      call q1_stiffness(x, sub%young, sub%poisson, ke)
+      do i = 1, 8
+        a = ln(i)
+        do j = 1, 8
+          b = ln(j)
+          pos = 0
+          do m = adjptr(a), adjptr(a + 1) - 1
+            if (adj(m) == b) then
+              pos = m - adjptr(a)
+              exit
+            end if
+          end do
+          do c = 1, 3
+            base = sub%K%rowptr(3*(a - 1) + c) + 3*pos
+            sub%K%values(base:base + 2) = sub%K%values(base:base + 2) + &
+                                          ke(3*(i - 1) + c, 3*(j - 1) + 1:3*(j - 1) + 3)
+          end do
+        end do
+      end do
+    end do
+  end subroutine assemble_stiffness
+
+  pure subroutine insertion_sort(v)
+    integer(ip), intent(inout) :: v(:)
+    integer(ip) :: i, j, t
+    do i = 2, size(v)
+      t = v(i)
+      j = i - 1
+      do while (j >= 1)
+        if (v(j) <= t) exit
+        v(j + 1) = v(j)
+        j = j - 1
+      end do
+      v(j + 1) = t
+    end do
+  end subroutine insertion_sort
+
+  !> f += consistent nodal forces of a uniform traction (force per area) on
+  !> the element faces of `sub` that lie on box face `face` (face_x0 ... face_z1).
+  subroutine add_face_traction(dec, sub, face, traction, f)
+    type(decomposition_t), intent(in) :: dec
+    type(subdomain_t), intent(in) :: sub
+    integer(ip), intent(in) :: face
+    real(dp), intent(in) :: traction(3)
+    real(dp), intent(inout) :: f(:)
+    integer(ip) :: e, m, a, fn(4)
+    real(dp) :: fe(3, 4)
+    do e = 1, sub%nelem
+      if (.not. dec%mesh%element_on_face(sub%elem_gid(e), face)) cycle
+      fn = sub%elem_nodes(q1_face_nodes(:, face), e)
+      call q1_face_load(sub%coords(:, fn), traction, fe)
+      do m = 1, 4
+        a = fn(m)
+        f(3*a - 2:3*a) = f(3*a - 2:3*a) + fe(:, m)
+      end do
+    end do
+  end subroutine add_face_traction
+
+  !> area(nnodes): the integral of each node's shape function over the part of
+  !> box face `face` (default z = 0, the contact face) covered by `sub`; 0 for
+  !> nodes not on it. Copies of a node in several subdomains each get their
+  !> subdomain's share; the node's tributary area is the sum over copies.
+  subroutine face_tributary_areas(dec, sub, area, face)
+    type(decomposition_t), intent(in) :: dec
+    type(subdomain_t), intent(in) :: sub
+    real(dp), intent(out) :: area(:)
+    integer(ip), intent(in), optional :: face
+    integer(ip) :: e, fc, fn(4)
+    real(dp) :: w(4)
+    fc = face_z0
+    if (present(face)) fc = face
+    if (size(area) < sub%nnodes) call fatal_error('face_tributary_areas: area shorter than nnodes')
+    area = 0
+    do e = 1, sub%nelem
+      if (.not. dec%mesh%element_on_face(sub%elem_gid(e), fc)) cycle
+      fn = sub%elem_nodes(q1_face_nodes(:, fc), e)
+      call q1_face_shape_integrals(sub%coords(:, fn), w)
+      area(fn) = area(fn) + w
+    end do
+  end subroutine face_tributary_areas
+
+  !> The 24 displacements of element e of `sub` from the subdomain vector u(ndof).
+  pure function element_displacements(sub, e, u) result(ue)
+    type(subdomain_t), intent(in) :: sub
+    integer(ip), intent(in) :: e
+    real(dp), intent(in) :: u(:)
+    real(dp) :: ue(24)
+    integer(ip) :: i, a
+    do i = 1, 8
+      a = sub%elem_nodes(i, e)
+      ue(3*i - 2:3*i) = u(3*a - 2:3*a)
+    end do
+  end function element_displacements
+
+  !> Von Mises stress vm(nelem) at the element centroids for the subdomain
+  !> displacements u(ndof).
+  subroutine subdomain_von_mises(sub, u, vm)
+    type(subdomain_t), intent(in) :: sub
+    real(dp), intent(in) :: u(:)
+    real(dp), intent(out) :: vm(:)
+    integer(ip) :: e
+    real(dp) :: sigma(6)
+    if (size(u) < sub%ndof .or. size(vm) < sub%nelem) &
+      call fatal_error('subdomain_von_mises: u or vm too short')
+    do e = 1, sub%nelem
+      call q1_centroid_stress(sub%coords(:, sub%elem_nodes(:, e)), element_displacements(sub, e, u), &
+                              sub%young, sub%poisson, sigma)
+      vm(e) = von_mises(sigma)
+    end do
+  end subroutine subdomain_von_mises
+end module assembly

@@ -1,0 +1,179 @@
+!> The trilinear hexahedron (Q1, 8 nodes) of isotropic linear elasticity.
+!>
+!> Node order (reference coordinates): 1 (-,-,-) 2 (+,-,-) 3 (+,+,-) 4 (-,+,-),
+!> 5..8 the same at +1, i.e. the mesh order (i,j,k) (i+1,j,k) (i+1,j+1,k) (i,j+1,k).
+!> Element dof of node a, component c: 3*(a-1) + c. Voigt order of strains and
+!> stresses: xx, yy, zz, xy, yz, zx, with engineering shear strains (2 eps_xy).
+!> Full 2x2x2 Gauss quadrature for the stiffness; 2x2 Gauss on faces.
+module q1_element
+  use kinds, only: dp, ip
+  use errors, only: fatal_error
+  implicit none
+  private
+
+  public :: elasticity_matrix, q1_shape, q1_gradients, q1_stiffness, q1_face_shape_integrals, &
+            q1_face_load, q1_centroid_stress, von_mises
+
+  !> Local nodes of the 6 element faces, ordered around each face; faces in the
+  !> order of box_mesh: x0, x1, y0, y1, z0, z1 (z0 = nodes 1..4, z1 = 5..8).
+  integer(ip), parameter, public :: q1_face_nodes(4, 6) = reshape([1, 4, 8, 5, 2, 3, 7, 6, &
+                                                                    1, 2, 6, 5, 4, 3, 7, 8, &
+                                                                    1, 2, 3, 4, 5, 6, 7, 8], [4, 6])
+
+  real(dp), parameter :: ref(3, 8) = reshape([-1, -1, -1, 1, -1, -1, 1, 1, -1, -1, 1, -1, &
+                                              -1, -1, 1, 1, -1, 1, 1, 1, 1, -1, 1, 1], [3, 8])
+  real(dp), parameter :: gauss = 0.577350269189625764509148780502_dp   ! 1/sqrt(3)
+
+contains
+
+  !> Isotropic elasticity matrix D (6x6, Voigt order above).
+  pure function elasticity_matrix(young, poisson) result(d)
+    real(dp), intent(in) :: young, poisson
+    real(dp) :: d(6, 6), lambda, mu
+    integer :: i
+    lambda = young*poisson/((1 + poisson)*(1 - 2*poisson))
+    mu = young/(2*(1 + poisson))
+    d = 0
+    d(1:3, 1:3) = lambda
+    do i = 1, 3
+      d(i, i) = lambda + 2*mu
+      d(i + 3, i + 3) = mu
+    end do
+  end function elasticity_matrix
+
+  !> Shape functions n(8) and their reference derivatives dn(8,3) at xi(3).
+  pure subroutine q1_shape(xi, n, dn)
+    real(dp), intent(in) :: xi(3)
+    real(dp), intent(out) :: n(8), dn(8, 3)
+    real(dp) :: f(3)
+    integer :: a
+    do a = 1, 8
+      f = 1 + ref(:, a)*xi
+      n(a) = f(1)*f(2)*f(3)/8
+      dn(a, 1) = ref(1, a)*f(2)*f(3)/8
+      dn(a, 2) = f(1)*ref(2, a)*f(3)/8
+      dn(a, 3) = f(1)*f(2)*ref(3, a)/8
+    end do
+  end subroutine q1_shape
+
+  !> Physical gradients g(8,3) = dN_a/dx_i and det J at reference point xi,
+  !> for node coordinates x(3,8). Stops on a non-positive Jacobian.
+  subroutine q1_gradients(x, xi, g, detj)
+    real(dp), intent(in) :: x(3, 8), xi(3)
+    real(dp), intent(out) :: g(8, 3), detj
+    real(dp) :: n(8), dn(8, 3), jac(3, 3), inv(3, 3)
+    call q1_shape(xi, n, dn)
+    jac = matmul(x, dn)                       ! jac(i,j) = dx_i/dxi_j
+    inv(1, 1) = jac(2, 2)*jac(3, 3) - jac(2, 3)*jac(3, 2)
+    inv(1, 2) = jac(1, 3)*jac(3, 2) - jac(1, 2)*jac(3, 3)
+    inv(1, 3) = jac(1, 2)*jac(2, 3) - jac(1, 3)*jac(2, 2)
+    inv(2, 1) = jac(2, 3)*jac(3, 1) - jac(2, 1)*jac(3, 3)
+    inv(2, 2) = jac(1, 1)*jac(3, 3) - jac(1, 3)*jac(3, 1)
+    inv(2, 3) = jac(1, 3)*jac(2, 1) - jac(1, 1)*jac(2, 3)
+    inv(3, 1) = jac(2, 1)*jac(3, 2) - jac(2, 2)*jac(3, 1)
+    inv(3, 2) = jac(1, 2)*jac(3, 1) - jac(1, 1)*jac(3, 2)
+    inv(3, 3) = jac(1, 1)*jac(2, 2) - jac(1, 2)*jac(2, 1)
+    detj = jac(1, 1)*inv(1, 1) + jac(1, 2)*inv(2, 1) + jac(1, 3)*inv(3, 1)
+    if (.not. detj > 0) call fatal_error('q1_gradients: element with a non-positive Jacobian '// &
+                                         '(mesh too distorted or inverted)')
+    inv = inv/detj                            ! inv(j,i) = dxi_j/dx_i
+    g = matmul(dn, inv)
+  end subroutine q1_gradients
+
+  !> Strain-displacement matrix b(6,24) from gradients g(8,3).
+  pure subroutine strain_matrix(g, b)
+    real(dp), intent(in) :: g(8, 3)
+    real(dp), intent(out) :: b(6, 24)
+    integer :: a, c
+    b = 0
+    do a = 1, 8
+      c = 3*(a - 1)
+      b(1, c + 1) = g(a, 1)
+      b(2, c + 2) = g(a, 2)
+      b(3, c + 3) = g(a, 3)
+      b(4, c + 1) = g(a, 2)
+      b(4, c + 2) = g(a, 1)
+      b(5, c + 2) = g(a, 3)
+      b(5, c + 3) = g(a, 2)
+      b(6, c + 1) = g(a, 3)
+      b(6, c + 3) = g(a, 1)
+    end do
+  end subroutine strain_matrix
+
+  !> Element stiffness ke(24,24) of the element with node coordinates x(3,8).
+  subroutine q1_stiffness(x, young, poisson, ke)
+    real(dp), intent(in) :: x(3, 8), young, poisson
+    real(dp), intent(out) :: ke(24, 24)
+    real(dp) :: d(6, 6), g(8, 3), b(6, 24), db(6, 24), detj
+    integer :: p, q, r
+    d = elasticity_matrix(young, poisson)
+    ke = 0
+    do r = -1, 1, 2
+      do q = -1, 1, 2
+        do p = -1, 1, 2
+          call q1_gradients(x, gauss*[p, q, r], g, detj)
+          call strain_matrix(g, b)
+          db = matmul(d, b)*detj
+          ke = ke + matmul(transpose(b), db)
+        end do
+      end do
+    end do
+    ke = (ke + transpose(ke))/2   ! exactly symmetric
+  end subroutine q1_stiffness
+
+  !> Integrals w(4) of the 4 (bilinear) shape functions over a quadrilateral
+  !> face with corners xf(3,4) in cyclic order: the tributary areas of its nodes.
+  pure subroutine q1_face_shape_integrals(xf, w)
+    real(dp), intent(in) :: xf(3, 4)
+    real(dp), intent(out) :: w(4)
+    real(dp), parameter :: s(4) = [-1, 1, 1, -1], t(4) = [-1, -1, 1, 1]
+    real(dp) :: n(4), ns(4), nt(4), xs(3), xt(3), nrm(3), da
+    integer :: p, q, a
+    w = 0
+    do q = -1, 1, 2
+      do p = -1, 1, 2
+        do a = 1, 4
+          n(a) = (1 + s(a)*gauss*p)*(1 + t(a)*gauss*q)/4
+          ns(a) = s(a)*(1 + t(a)*gauss*q)/4
+          nt(a) = (1 + s(a)*gauss*p)*t(a)/4
+        end do
+        xs = matmul(xf, ns)
+        xt = matmul(xf, nt)
+        nrm = [xs(2)*xt(3) - xs(3)*xt(2), xs(3)*xt(1) - xs(1)*xt(3), xs(1)*xt(2) - xs(2)*xt(1)]
+        da = norm2(nrm)
+        w = w + n*da
+      end do
+    end do
+  end subroutine q1_face_shape_integrals
+
+  !> Consistent nodal forces fe(3,4) of a uniform traction t(3) (force per
+  !> area) on the face with corners xf(3,4): fe(:,a) = t * integral of N_a.
+  pure subroutine q1_face_load(xf, traction, fe)
+    real(dp), intent(in) :: xf(3, 4), traction(3)
+    real(dp), intent(out) :: fe(3, 4)
+    real(dp) :: w(4)
+    integer :: a
+    call q1_face_shape_integrals(xf, w)
+    do a = 1, 4
+      fe(:, a) = traction*w(a)
+    end do
+  end subroutine q1_face_load
+
+  !> Stress sigma(6) (Voigt order) at the element centroid (xi = 0) for the
+  !> element displacements u(24).
+  subroutine q1_centroid_stress(x, u, young, poisson, sigma)
+    real(dp), intent(in) :: x(3, 8), u(24), young, poisson
+    real(dp), intent(out) :: sigma(6)
+    real(dp) :: g(8, 3), b(6, 24), detj
+    call q1_gradients(x, [0.0_dp, 0.0_dp, 0.0_dp], g, detj)
+    call strain_matrix(g, b)
+    sigma = matmul(elasticity_matrix(young, poisson), matmul(b, u))
+  end subroutine q1_centroid_stress
+
+  !> Von Mises equivalent stress of sigma(6) (Voigt order).
+  pure real(dp) function von_mises(sigma)
+    real(dp), intent(in) :: sigma(6)
+    von_mises = sqrt(((sigma(1) - sigma(2))**2 + (sigma(2) - sigma(3))**2 + (sigma(3) - sigma(1))**2)/2 + &
+                     3*(sigma(4)**2 + sigma(5)**2 + sigma(6)**2))
+  end function von_mises
+end module q1_element

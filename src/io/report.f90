@@ -1,0 +1,127 @@
+!> Pieces of the run report: the timing table (printed and as JSON) and the
+!> peak memory of the ranks.
+module report
+  use kinds, only: dp, i8, MPI_INT_I8
+  use timers, only: timer_stat_t
+  use logger, only: log_is_root, log_unit
+  use json_writer, only: json_writer_t
+  use mpi_f08, only: MPI_Comm, MPI_Allreduce, MPI_MAX, MPI_MIN, MPI_SUM
+  implicit none
+  private
+
+  public :: print_timing_table, timings_json, peak_rss_bytes, memory_json
+
+contains
+
+  !> Print one line per phase: min, max and mean seconds over the ranks and
+  !> the share of the mean in `total`. Without `total`, the total is the
+  !> mean of a phase named 'total' if there is one, else the sum of the
+  !> means (right when the phases do not nest). Through the logger (rank 0).
+  subroutine print_timing_table(stats, total)
+    type(timer_stat_t), intent(in) :: stats(:)
+    real(dp), intent(in), optional :: total
+    real(dp) :: reference, share
+    integer :: i, u, width
+
+    if (.not. log_is_root()) return
+    if (present(total)) then
+      reference = total
+    else
+      reference = default_total(stats)
+    end if
+    width = 5
+    do i = 1, size(stats)
+      width = max(width, len_trim(stats(i)%name))
+    end do
+    u = log_unit()
+    write (u, '(a,3a13,a12)') 'phase'//repeat(' ', width - 5), 'min [s]', 'max [s]', 'mean [s]', 'share'
+    do i = 1, size(stats)
+      share = 0
+      if (reference > 0) share = 100*stats(i)%mean/reference
+      write (u, '(a,3f13.6,f12.1,a)') stats(i)%name(1:width), stats(i)%min, stats(i)%max, &
+        stats(i)%mean, share, '%'
+    end do
+    flush (u)
+  end subroutine print_timing_table
+
+  real(dp) function default_total(stats)
+    type(timer_stat_t), intent(in) :: stats(:)
+    integer :: i
+    do i = 1, size(stats)
+      if (stats(i)%name == 'total') then
+        default_total = stats(i)%mean
+        return
+      end if
+    end do
+    default_total = sum(stats%mean)
+  end function default_total
+
+  !> The timings as a JSON object {"phase": {"min": s, "max": s, "mean": s}, ...}.
+  function timings_json(stats) result(json)
+    type(timer_stat_t), intent(in) :: stats(:)
+    character(len=:), allocatable :: json
+    type(json_writer_t) :: w
+    integer :: i
+    call w%begin_object()
+    do i = 1, size(stats)
+      call w%begin_object(trim(stats(i)%name))
+      call w%add('min', stats(i)%min)
+      call w%add('max', stats(i)%max)
+      call w%add('mean', stats(i)%mean)
+      call w%end_object()
+    end do
+    call w%end_object()
+    json = w%text()
+  end function timings_json
+
+  !> Peak resident set size of this process in bytes (VmHWM of
+  !> /proc/self/status), or -1 where that is not available.
+  function peak_rss_bytes() result(bytes)
+    integer(i8) :: bytes
+    character(len=256) :: line
+    integer :: u, status, colon
+    integer(i8) :: kib
+
+    bytes = -1
+    open (newunit=u, file='/proc/self/status', status='old', action='read', iostat=status)
+    if (status /= 0) return
+    do
+      read (u, '(a)', iostat=status) line
+      if (status /= 0) exit
+      if (line(1:6) /= 'VmHWM:') cycle
+      colon = index(line, ':')
+      read (line(colon+1:), *, iostat=status) kib
+      if (status == 0 .and. index(line, 'kB') > 0) bytes = 1024*kib
+      exit
+    end do
+    close (u)
+  end function peak_rss_bytes
+
+  !> {"peak_rss_bytes": {"max": .., "sum": ..}}: the largest peak of one rank
+  !> and the sum over the ranks of `comm` (null if some rank cannot tell).
+  !> Collective.
+  function memory_json(comm) result(json)
+    type(MPI_Comm), intent(in) :: comm
+    character(len=:), allocatable :: json
+    type(json_writer_t) :: w
+    integer(i8) :: mine, most, least, total
+    integer :: ierr
+
+    mine = peak_rss_bytes()
+    call MPI_Allreduce(mine, most, 1, MPI_INT_I8, MPI_MAX, comm, ierr)
+    call MPI_Allreduce(mine, least, 1, MPI_INT_I8, MPI_MIN, comm, ierr)
+    call MPI_Allreduce(max(mine, 0_i8), total, 1, MPI_INT_I8, MPI_SUM, comm, ierr)
+    call w%begin_object()
+    call w%begin_object('peak_rss_bytes')
+    if (least < 0) then
+      call w%add_null('max')
+      call w%add_null('sum')
+    else
+      call w%add('max', most)
+      call w%add('sum', total)
+    end if
+    call w%end_object()
+    call w%end_object()
+    json = w%text()
+  end function memory_json
+end module report

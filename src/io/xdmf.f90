@@ -1,0 +1,128 @@
+!> The XDMF (version 3) description of the HDF5 file written by hdf5_output,
+!> so that ParaView (and VisIt) can open the fields.
+!>
+!> Two uniform grids in one domain:
+!> - "mesh": Hexahedron topology from /connectivity (nelem x 8, 0-based),
+!>   XYZ geometry from /coordinates (nnodes x 3), node attribute displacement
+!>   (Vector), cell attributes subdomain and von_mises (Scalar);
+!> - "contact" (only when there are contact nodes): Polyvertex topology, one
+!>   vertex per contact node from /contact_vertices (0, 1, ...), geometry from
+!>   /contact_coordinates (ncontact x 3), node attributes contact_pressure and
+!>   contact_gap.
+!> Shapes are written as HDF5 (C order) sees them; the Fortran arrays are the
+!> transposes, e.g. coordinates(3, nnodes).
+module xdmf
+  use kinds, only: i8
+  implicit none
+  private
+
+  public :: write_xdmf
+
+contains
+
+  !> Write the XDMF file `path` for the HDF5 file `h5_name` (a name relative
+  !> to the directory of `path`) holding `nnodes` nodes, `nelem` hexahedra and
+  !> `ncontact` contact nodes. `status` is non-zero on an I/O error, with `msg`.
+  subroutine write_xdmf(path, h5_name, nnodes, nelem, ncontact, status, msg)
+    character(len=*), intent(in) :: path, h5_name
+    integer(i8), intent(in) :: nnodes, nelem, ncontact
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    character(len=:), allocatable :: h5
+    integer :: u
+
+    msg = ''
+    h5 = xml_escape(trim(h5_name))
+    open (newunit=u, file=path, status='replace', action='write', iostat=status, iomsg=msg)
+    if (status /= 0) return
+    write (u, '(a)', iostat=status, iomsg=msg) '<?xml version="1.0" ?>', &
+      '<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>', &
+      '<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">', &
+      '  <Domain>', &
+      '    <Grid Name="mesh" GridType="Uniform">', &
+      '      <Topology TopologyType="Hexahedron" NumberOfElements="'//str(nelem)//'" NodesPerElement="8">', &
+      data_item(h5, 'connectivity', nelem, 8, 'Int', 4), &
+      '      </Topology>', &
+      '      <Geometry GeometryType="XYZ">', &
+      data_item(h5, 'coordinates', nnodes, 3, 'Float', 8), &
+      '      </Geometry>', &
+      '      <Attribute Name="displacement" AttributeType="Vector" Center="Node">', &
+      data_item(h5, 'displacement', nnodes, 3, 'Float', 8), &
+      '      </Attribute>', &
+      '      <Attribute Name="subdomain" AttributeType="Scalar" Center="Cell">', &
+      data_item(h5, 'subdomain', nelem, 0, 'Int', 4), &
+      '      </Attribute>', &
+      '      <Attribute Name="von_mises" AttributeType="Scalar" Center="Cell">', &
+      data_item(h5, 'von_mises', nelem, 0, 'Float', 8), &
+      '      </Attribute>', &
+      '    </Grid>'
+    if (status /= 0) return
+    if (ncontact > 0) then
+      write (u, '(a)', iostat=status, iomsg=msg) &
+        '    <Grid Name="contact" GridType="Uniform">', &
+        '      <Topology TopologyType="Polyvertex" NumberOfElements="'//str(ncontact)// &
+        '" NodesPerElement="1">', &
+        data_item(h5, 'contact_vertices', ncontact, 0, 'Int', 4), &
+        '      </Topology>', &
+        '      <Geometry GeometryType="XYZ">', &
+        data_item(h5, 'contact_coordinates', ncontact, 3, 'Float', 8), &
+        '      </Geometry>', &
+        '      <Attribute Name="contact_pressure" AttributeType="Scalar" Center="Node">', &
+        data_item(h5, 'contact_pressure', ncontact, 0, 'Float', 8), &
+        '      </Attribute>', &
+        '      <Attribute Name="contact_gap" AttributeType="Scalar" Center="Node">', &
+        data_item(h5, 'contact_gap', ncontact, 0, 'Float', 8), &
+        '      </Attribute>', &
+        '    </Grid>'
+      if (status /= 0) return
+    end if
+    write (u, '(a)', iostat=status, iomsg=msg) '  </Domain>', '</Xdmf>'
+    if (status /= 0) return
+    close (u, iostat=status, iomsg=msg)
+  end subroutine write_xdmf
+
+  !> One DataItem line for dataset /`name` of `rows` x `columns` (a vector
+  !> of `rows` when `columns` is 0).
+  function data_item(h5, name, rows, columns, number_type, precision) result(line)
+    character(len=*), intent(in) :: h5, name, number_type
+    integer(i8), intent(in) :: rows
+    integer, intent(in) :: columns, precision
+    character(len=:), allocatable :: line, dims
+    dims = str(rows)
+    if (columns > 0) dims = dims//' '//str(int(columns, i8))
+    line = '        <DataItem Dimensions="'//dims//'" NumberType="'//number_type//'" Precision="'// &
+           str(int(precision, i8))//'" Format="HDF">'//h5//':/'//name//'</DataItem>'
+  end function data_item
+
+  function str(n) result(s)
+    integer(i8), intent(in) :: n
+    character(len=:), allocatable :: s
+    character(len=24) :: buf
+    write (buf, '(i0)') n
+    s = trim(buf)
+  end function str
+
+  !> `s` with the characters XML reserves replaced by entities.
+  function xml_escape(s) result(r)
+    character(len=*), intent(in) :: s
+    character(len=:), allocatable :: r
+    integer :: i
+    r = ''
+    do i = 1, len(s)
+      select case (s(i:i))
+      case ('&')
+        r = r//'&amp;'
+      case ('<')
+        r = r//'&lt;'
+      case ('>')
+        r = r//'&gt;'
+      case ('"')
+        r = r//'&quot;'
+      case ("'")
+        r = r//'&apos;'
+      case default
+        r = r//s(i:i)
+      end select
+    end do
+  end function xml_escape
+end module xdmf

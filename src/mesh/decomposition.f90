@@ -1,0 +1,403 @@
+!> Decomposition of the global box mesh into subdomains and the map of
+!> subdomains to MPI ranks. Everything here is replicated on every rank
+!> (arrays of the size of the number of global elements at most).
+!>
+!> 'box': box subdomains (I,J,K) of nel elements, id 1 + I + Nx*(J + Ny*K).
+!> 'metis': the global mesh cut into product(nsub) parts by METIS_PartMeshDual
+!> (parts share faces: ncommon = 4) on rank 0. A part that is not
+!> face-connected is split into its face-connected components, each one a
+!> subdomain; empty parts are dropped. Ids are 1..N ordered by (METIS part,
+!> smallest element gid of the component).
+!> Mapping 'block': contiguous blocks of ids, sizes differing by at most one;
+!> 'metis': METIS_PartGraphKway on the subdomain adjacency graph (subdomains
+!> sharing a node), vertex weights = element counts; a rank METIS leaves empty
+!> takes the largest id of the rank with the most subdomains.
+module decomposition
+  use kinds, only: ip, name_len, MPI_INT_IP
+  use errors, only: collective_error, fatal_error, exit_input_error
+  use logger, only: log_message
+  use params, only: params_t
+  use metis_wrapper, only: metis_part_mesh_dual, metis_part_graph_kway
+  use box_mesh, only: box_mesh_t, box_mesh_init
+  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast
+  implicit none
+  private
+
+  public :: build_decomposition, split_into_components, block_mapping, subdomain_graph
+
+  !> The decomposition, replicated on every rank of `comm`.
+  type, public :: decomposition_t
+    type(box_mesh_t) :: mesh
+    type(MPI_Comm) :: comm                              !< the ranks that share the subdomains
+    character(len=name_len) :: method = 'box'           !< 'box' | 'metis'
+    integer(ip) :: nsubdomains = 0, nranks = 1, rank = 0
+    integer(ip), allocatable :: element_subdomain(:)    !< element gid -> subdomain id
+    integer(ip), allocatable :: subdomain_rank(:)       !< subdomain id -> owning rank (0-based)
+    integer(ip), allocatable :: local_subdomains(:)     !< ids owned by this rank, ascending
+    !> elements of subdomain s: subdomain_elements(subdomain_element_ptr(s):subdomain_element_ptr(s+1)-1),
+    !> ascending gids
+    integer(ip), allocatable :: subdomain_element_ptr(:), subdomain_elements(:)
+  contains
+    procedure :: node_subdomains
+    procedure :: node_subdomain_list
+    procedure :: subdomain_nelements
+  end type decomposition_t
+
+contains
+
+  !> Build the decomposition of `p%mesh` over the ranks of `comm`. Collective.
+  !> More ranks than subdomains is an input error (every rank exits, status 2).
+  subroutine build_decomposition(p, comm, dec)
+    type(params_t), intent(in) :: p
+    type(MPI_Comm), intent(in) :: comm
+    type(decomposition_t), intent(out) :: dec
+    integer :: ierr, rank, nranks
+    integer(ip) :: ne, s
+    character(len=256) :: msg
+
+    call MPI_Comm_rank(comm, rank, ierr)
+    call MPI_Comm_size(comm, nranks, ierr)
+    dec%comm = comm
+    dec%rank = rank
+    dec%nranks = nranks
+    dec%method = p%mesh%decomposition
+    call box_mesh_init(dec%mesh, p%mesh%nsub, p%mesh%nel, p%mesh%lengths, p%mesh%distortion, &
+                       p%mesh%distortion_seed)
+    ne = dec%mesh%num_elements()
+    allocate (dec%element_subdomain(ne))
+
+    select case (trim(p%mesh%decomposition))
+    case ('box')
+      call box_partition(dec%mesh, dec%element_subdomain)
+      dec%nsubdomains = product(p%mesh%nsub)
+    case ('metis')
+      if (rank == 0) call metis_partition(dec%mesh, dec%element_subdomain, dec%nsubdomains)
+      call MPI_Bcast(dec%nsubdomains, 1, MPI_INT_IP, 0, comm, ierr)
+      call MPI_Bcast(dec%element_subdomain, ne, MPI_INT_IP, 0, comm, ierr)
+    case default
+      call collective_error("group &mesh, variable decomposition: must be 'box' or 'metis' (got "// &
+                            trim(p%mesh%decomposition)//')', comm, exit_input_error)
+    end select
+    call element_lists(dec)
+
+    if (nranks > dec%nsubdomains) then
+      write (msg, '(a,3(1x,i0),a,i0,a,i0,a,i0,a)') 'group &mesh, variable nsub: nsub =', p%mesh%nsub, &
+        ' gives ', dec%nsubdomains, ' subdomains, fewer than the ', nranks, &
+        ' MPI ranks; every rank needs a subdomain: run on at most ', dec%nsubdomains, &
+        ' ranks or raise nsub'
+      call collective_error(msg, comm, exit_input_error)
+    end if
+
+    allocate (dec%subdomain_rank(dec%nsubdomains))
+    select case (trim(p%mesh%mapping))
+    case ('block')
+      dec%subdomain_rank = block_mapping(dec%nsubdomains, int(nranks, ip))
+    case ('metis')
+      if (rank == 0) call metis_mapping(dec, dec%subdomain_rank)
+      call MPI_Bcast(dec%subdomain_rank, dec%nsubdomains, MPI_INT_IP, 0, comm, ierr)
+    case default
+      call collective_error("group &mesh, variable mapping: must be 'block' or 'metis' (got "// &
+                            trim(p%mesh%mapping)//')', comm, exit_input_error)
+    end select
+    dec%local_subdomains = pack([(s, s=1, dec%nsubdomains)], dec%subdomain_rank == rank)
+  end subroutine build_decomposition
+
+  !> Box subdomains: element -> id 1 + I + Nx*(J + Ny*K).
+  subroutine box_partition(mesh, element_subdomain)
+    type(box_mesh_t), intent(in) :: mesh
+    integer(ip), intent(out) :: element_subdomain(:)
+    integer(ip) :: e
+    do e = 1, mesh%num_elements()
+      element_subdomain(e) = mesh%box_subdomain(e)
+    end do
+  end subroutine box_partition
+
+  !> METIS parts of the whole mesh, split into face-connected subdomains (rank 0).
+  subroutine metis_partition(mesh, element_subdomain, nsubdomains)
+    type(box_mesh_t), intent(in) :: mesh
+    integer(ip), intent(out) :: element_subdomain(:)
+    integer(ip), intent(out) :: nsubdomains
+    integer(ip), allocatable :: eptr(:), eind(:), part(:)
+    integer(ip) :: ne, e, nparts, nsplit, ndropped
+    character(len=200) :: msg
+
+    ne = mesh%num_elements()
+    nparts = product(mesh%nsub)
+    allocate (eptr(ne + 1), eind(8*ne), part(ne))
+    do e = 1, ne
+      eptr(e) = 8*(e - 1) + 1
+      eind(8*(e - 1) + 1:8*e) = mesh%element_nodes(e)
+    end do
+    eptr(ne + 1) = 8*ne + 1
+    call metis_part_mesh_dual(ne, mesh%num_nodes(), eptr, eind, 4_ip, nparts, part)
+    deallocate (eptr, eind)
+    call split_into_components(mesh, part, nparts, element_subdomain, nsubdomains, nsplit, ndropped)
+    if (nsplit > 0) then
+      write (msg, '(a,i0,a,i0,a)') 'decomposition: ', nsplit, ' METIS part(s) not face-connected, '// &
+        'split into their connected components (', nsubdomains, ' subdomains)'
+      call log_message(msg)
+    end if
+    if (ndropped > 0) then
+      write (msg, '(a,i0,a)') 'decomposition: ', ndropped, ' empty METIS part(s) dropped'
+      call log_message(msg)
+    end if
+  end subroutine metis_partition
+
+  !> Turn a partition part(e) in 1..nparts of the elements into subdomains:
+  !> each face-connected component of a part becomes one subdomain, ids 1..N
+  !> in the order (part, smallest element gid); empty parts give none.
+  !> nsplit: parts with more than one component; ndropped: empty parts.
+  subroutine split_into_components(mesh, part, nparts, element_subdomain, nsubdomains, nsplit, ndropped)
+    type(box_mesh_t), intent(in) :: mesh
+    integer(ip), intent(in) :: part(:), nparts
+    integer(ip), intent(out) :: element_subdomain(:)
+    integer(ip), intent(out) :: nsubdomains, nsplit, ndropped
+    integer(ip), allocatable :: label(:), queue(:), comp_part(:), ncomp_of(:), offset(:), new_id(:)
+    integer(ip) :: ne, e, x, y, head, tail, ncomp, d, c, ijk(3), nijk(3)
+
+    ne = mesh%num_elements()
+    if (any(part(1:ne) < 1) .or. any(part(1:ne) > nparts)) &
+      call fatal_error('split_into_components: part out of range')
+    allocate (label(ne), queue(ne), comp_part(ne))
+    label = 0
+    ncomp = 0
+    do e = 1, ne
+      if (label(e) /= 0) cycle
+      ncomp = ncomp + 1
+      comp_part(ncomp) = part(e)
+      label(e) = ncomp
+      head = 1
+      tail = 1
+      queue(1) = e
+      do while (head <= tail)
+        x = queue(head)
+        head = head + 1
+        ijk = mesh%element_ijk(x)
+        do d = 1, 3
+          do c = -1, 1, 2
+            nijk = ijk
+            nijk(d) = nijk(d) + c
+            if (nijk(d) < 0 .or. nijk(d) >= mesh%ng(d)) cycle
+            y = mesh%element_gid(nijk)
+            if (label(y) /= 0 .or. part(y) /= part(x)) cycle
+            label(y) = ncomp
+            tail = tail + 1
+            queue(tail) = y
+          end do
+        end do
+      end do
+    end do
+    ! components in discovery order = ascending smallest element; stable by part
+    allocate (ncomp_of(nparts), offset(nparts), new_id(ncomp))
+    ncomp_of = 0
+    do c = 1, ncomp
+      ncomp_of(comp_part(c)) = ncomp_of(comp_part(c)) + 1
+    end do
+    offset(1) = 0
+    do x = 2, nparts
+      offset(x) = offset(x - 1) + ncomp_of(x - 1)
+    end do
+    do c = 1, ncomp
+      offset(comp_part(c)) = offset(comp_part(c)) + 1
+      new_id(c) = offset(comp_part(c))
+    end do
+    do e = 1, ne
+      element_subdomain(e) = new_id(label(e))
+    end do
+    nsubdomains = ncomp
+    nsplit = count(ncomp_of > 1)
+    ndropped = count(ncomp_of == 0)
+  end subroutine split_into_components
+
+  !> Subdomain -> rank for contiguous blocks of ids (the first mod(n, nranks)
+  !> ranks get one more).
+  pure function block_mapping(n, nranks) result(rank_of)
+    integer(ip), intent(in) :: n, nranks
+    integer(ip) :: rank_of(n)
+    integer(ip) :: r, q, m, first, nblock
+    q = n/nranks
+    m = mod(n, nranks)
+    first = 1
+    do r = 0, nranks - 1
+      nblock = q
+      if (r < m) nblock = nblock + 1
+      rank_of(first:first + nblock - 1) = r
+      first = first + nblock
+    end do
+  end function block_mapping
+
+  !> Elements of each subdomain, CSR by subdomain id, ascending gids.
+  subroutine element_lists(dec)
+    type(decomposition_t), intent(inout) :: dec
+    integer(ip) :: ne, e, s
+    integer(ip), allocatable :: next(:)
+    ne = size(dec%element_subdomain)
+    allocate (dec%subdomain_element_ptr(dec%nsubdomains + 1), dec%subdomain_elements(ne), &
+              next(dec%nsubdomains))
+    dec%subdomain_element_ptr = 0
+    do e = 1, ne
+      s = dec%element_subdomain(e)
+      dec%subdomain_element_ptr(s + 1) = dec%subdomain_element_ptr(s + 1) + 1
+    end do
+    dec%subdomain_element_ptr(1) = 1
+    do s = 1, dec%nsubdomains
+      dec%subdomain_element_ptr(s + 1) = dec%subdomain_element_ptr(s + 1) + dec%subdomain_element_ptr(s)
+    end do
+    next = dec%subdomain_element_ptr(1:dec%nsubdomains)
+    do e = 1, ne
+      s = dec%element_subdomain(e)
+      dec%subdomain_elements(next(s)) = e
+      next(s) = next(s) + 1
+    end do
+  end subroutine element_lists
+
+  !> Subdomain adjacency graph (1-based CSR, no self loops, neighbours
+  !> ascending): s and t are neighbours when they share at least one node.
+  subroutine subdomain_graph(dec, xadj, adjncy)
+    type(decomposition_t), intent(in) :: dec
+    integer(ip), allocatable, intent(out) :: xadj(:), adjncy(:)
+    integer(ip), allocatable :: marker(:), tmp(:)
+    integer(ip) :: n, s, t, k, e, di, dj, dk, ijk(3), nijk(3), nadj, first
+
+    n = dec%nsubdomains
+    allocate (xadj(n + 1), marker(n), adjncy(max(16, 8*n)))
+    marker = 0
+    nadj = 0
+    xadj(1) = 1
+    do s = 1, n
+      first = nadj + 1
+      do k = dec%subdomain_element_ptr(s), dec%subdomain_element_ptr(s + 1) - 1
+        e = dec%subdomain_elements(k)
+        ijk = dec%mesh%element_ijk(e)
+        do dk = -1, 1
+          do dj = -1, 1
+            do di = -1, 1
+              nijk = ijk + [di, dj, dk]
+              if (any(nijk < 0) .or. any(nijk >= dec%mesh%ng)) cycle
+              t = dec%element_subdomain(dec%mesh%element_gid(nijk))
+              if (t == s .or. marker(t) == s) cycle
+              marker(t) = s
+              if (nadj == size(adjncy)) then
+                allocate (tmp(2*size(adjncy)))
+                tmp(1:nadj) = adjncy(1:nadj)
+                call move_alloc(tmp, adjncy)
+              end if
+              nadj = nadj + 1
+              adjncy(nadj) = t
+            end do
+          end do
+        end do
+      end do
+      call insertion_sort(adjncy(first:nadj))
+      xadj(s + 1) = nadj + 1
+    end do
+    adjncy = adjncy(1:nadj)
+  end subroutine subdomain_graph
+
+  pure subroutine insertion_sort(a)
+    integer(ip), intent(inout) :: a(:)
+    integer(ip) :: i, j, v
+    do i = 2, size(a)
+      v = a(i)
+      j = i - 1
+      do while (j >= 1)
+        if (a(j) <= v) exit
+        a(j + 1) = a(j)
+        j = j - 1
+      end do
+      a(j + 1) = v
+    end do
+  end subroutine insertion_sort
+
+  !> METIS mapping of subdomains to ranks (rank 0).
+  subroutine metis_mapping(dec, rank_of)
+    type(decomposition_t), intent(in) :: dec
+    integer(ip), intent(out) :: rank_of(:)
+    integer(ip), allocatable :: xadj(:), adjncy(:), part(:), owned(:)
+    integer(ip), allocatable, target :: weights(:)
+    integer(ip) :: n, s, r, big, nr
+
+    n = dec%nsubdomains
+    nr = dec%nranks
+    if (nr == 1) then
+      rank_of = 0
+      return
+    end if
+    if (nr == n) then
+      rank_of = [(s - 1, s=1, n)]
+      return
+    end if
+    call subdomain_graph(dec, xadj, adjncy)
+    if (size(adjncy) == 0) adjncy = [0_ip]
+    allocate (weights(n), part(n))
+    weights = dec%subdomain_element_ptr(2:n + 1) - dec%subdomain_element_ptr(1:n)
+    call metis_part_graph_kway(n, xadj, adjncy, nr, part, weights)
+    rank_of = part - 1
+    ! no rank may stay empty: it takes the largest id of the fullest rank
+    allocate (owned(0:nr - 1))
+    owned = 0
+    do s = 1, n
+      owned(rank_of(s)) = owned(rank_of(s)) + 1
+    end do
+    do r = 0, nr - 1
+      if (owned(r) > 0) cycle
+      big = maxloc(owned, dim=1) - 1
+      do s = n, 1, -1
+        if (rank_of(s) == big) exit
+      end do
+      rank_of(s) = r
+      owned(big) = owned(big) - 1
+      owned(r) = 1
+    end do
+  end subroutine metis_mapping
+
+  !> Sorted unique ids of the subdomains holding a copy of node `gid`.
+  function node_subdomains(this, gid) result(ids)
+    class(decomposition_t), intent(in) :: this
+    integer(ip), intent(in) :: gid
+    integer(ip), allocatable :: ids(:)
+    integer(ip) :: list(8), n
+    call this%node_subdomain_list(gid, list, n)
+    ids = list(1:n)
+  end function node_subdomains
+
+  !> The same as node_subdomains without allocation: ids(1:n), n <= 8.
+  pure subroutine node_subdomain_list(this, gid, ids, n)
+    class(decomposition_t), intent(in) :: this
+    integer(ip), intent(in) :: gid
+    integer(ip), intent(out) :: ids(8), n
+    integer(ip) :: ijk(3), e(3), di, dj, dk, s, m, pos
+    ijk = this%mesh%node_ijk(gid)
+    n = 0
+    do dk = -1, 0
+      do dj = -1, 0
+        do di = -1, 0
+          e = ijk + [di, dj, dk]
+          if (any(e < 0) .or. any(e >= this%mesh%ng)) cycle
+          s = this%element_subdomain(this%mesh%element_gid(e))
+          ! insert s into the sorted ids(1:n) unless present
+          pos = n + 1
+          do m = 1, n
+            if (ids(m) >= s) then
+              pos = m
+              exit
+            end if
+          end do
+          if (pos <= n) then
+            if (ids(pos) == s) cycle
+          end if
+          ids(pos + 1:n + 1) = ids(pos:n)
+          ids(pos) = s
+          n = n + 1
+        end do
+      end do
+    end do
+  end subroutine node_subdomain_list
+
+  !> Number of elements of subdomain `id`.
+  pure integer(ip) function subdomain_nelements(this, id)
+    class(decomposition_t), intent(in) :: this
+    integer(ip), intent(in) :: id
+    subdomain_nelements = this%subdomain_element_ptr(id + 1) - this%subdomain_element_ptr(id)
+  end function subdomain_nelements
+end module decomposition

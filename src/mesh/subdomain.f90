@@ -1,0 +1,75 @@
+!> One subdomain: its geometry (filled here, from the decomposition) and its
+!> linear system K, f, R (filled by fem/assembly).
+!>
+!> Local node a <-> global node node_gid(a), node_gid ascending; the local dof
+!> of node a, component c (1..3) is 3*(a-1) + c.
+module subdomain
+  use kinds, only: dp, ip
+  use errors, only: fatal_error
+  use csr_matrix, only: csr_t
+  use decomposition, only: decomposition_t
+  use sorting, only: sort_unique, binary_search
+  implicit none
+  private
+
+  public :: build_subdomain, local_node
+
+  !> A subdomain and its system.
+  type, public :: subdomain_t
+    integer(ip) :: id = 0
+    integer(ip) :: nnodes = 0, nelem = 0, ndof = 0      !< ndof = 3*nnodes
+    integer(ip), allocatable :: node_gid(:)             !< ascending; local node a <-> node_gid(a)
+    real(dp), allocatable :: coords(:, :)               !< (3, nnodes)
+    integer(ip), allocatable :: elem_gid(:)             !< (nelem), ascending
+    integer(ip), allocatable :: elem_nodes(:, :)        !< (8, nelem) local node numbers, Q1 order
+    real(dp) :: centroid(3) = 0                         !< mean of the node coordinates
+    real(dp) :: young = 0, poisson = 0
+    type(csr_t) :: K                                    !< stiffness (full symmetric storage)
+    real(dp), allocatable :: f(:)                       !< (ndof) load
+    real(dp), allocatable :: R(:, :)                    !< (ndof, 6) orthonormal kernel basis
+  end type subdomain_t
+
+contains
+
+  !> Geometry of subdomain `id` of `dec`: nodes, coordinates, elements, centroid.
+  !> Work proportional to the size of the subdomain.
+  subroutine build_subdomain(dec, id, sub)
+    type(decomposition_t), intent(in) :: dec
+    integer(ip), intent(in) :: id
+    type(subdomain_t), intent(out) :: sub
+    integer(ip) :: first, e, a, n, nodes(8)
+    integer(ip), allocatable :: gids(:)
+
+    if (id < 1 .or. id > dec%nsubdomains) call fatal_error('build_subdomain: no such subdomain id')
+    first = dec%subdomain_element_ptr(id)
+    sub%id = id
+    sub%nelem = dec%subdomain_element_ptr(id + 1) - first
+    sub%elem_gid = dec%subdomain_elements(first:first + sub%nelem - 1)
+    allocate (gids(8*sub%nelem), sub%elem_nodes(8, sub%nelem))
+    do e = 1, sub%nelem
+      gids(8*(e - 1) + 1:8*e) = dec%mesh%element_nodes(sub%elem_gid(e))
+    end do
+    call sort_unique(gids, n)
+    sub%nnodes = n
+    sub%ndof = 3*n
+    sub%node_gid = gids(1:n)
+    allocate (sub%coords(3, n))
+    do a = 1, n
+      sub%coords(:, a) = dec%mesh%node_coords(sub%node_gid(a))
+    end do
+    sub%centroid = sum(sub%coords, dim=2)/real(n, dp)
+    do e = 1, sub%nelem
+      nodes = dec%mesh%element_nodes(sub%elem_gid(e))
+      do a = 1, 8
+        sub%elem_nodes(a, e) = binary_search(sub%node_gid, nodes(a))
+      end do
+    end do
+  end subroutine build_subdomain
+
+  !> Local number of global node `gid` in `sub` (binary search), 0 if absent.
+  pure integer(ip) function local_node(sub, gid)
+    type(subdomain_t), intent(in) :: sub
+    integer(ip), intent(in) :: gid
+    local_node = binary_search(sub%node_gid, gid)
+  end function local_node
+end module subdomain

@@ -1,0 +1,42 @@
+# Run check_directory under mpiexec on DIRECTORY and judge the outcome.
+#   -DMPIEXEC= -DNP= -DPROGRAM= -DDIRECTORY= -DTIMEOUT=
+#   -DMAKE_FILE=<path>    create this regular file first (to block a mkdir)
+#   -DCLEAN=<path>        remove this file or tree first (a fresh start)
+#   -DEXPECT_FAIL=<regex> the run must exit non-zero with output matching it;
+#                         otherwise it must exit 0, DIRECTORY must then be a
+#                         directory with nothing left in it.
+if(CLEAN)
+  file(REMOVE_RECURSE "${CLEAN}")
+endif()
+if(MAKE_FILE)
+  file(REMOVE_RECURSE "${MAKE_FILE}")
+  file(WRITE "${MAKE_FILE}" "a regular file, not a directory\n")
+endif()
+execute_process(
+  COMMAND ${MPIEXEC} --oversubscribe --bind-to none -n ${NP} ${PROGRAM} ${DIRECTORY}
+  RESULT_VARIABLE status OUTPUT_VARIABLE out ERROR_VARIABLE err TIMEOUT ${TIMEOUT})
+set(all "${out}\n${err}")
+message("exit status: ${status}\n--- output ---\n${all}")
+if(status MATCHES "timeout|Process terminated")
+  message(FATAL_ERROR "the run did not end within ${TIMEOUT} s (a hang?)")
+endif()
+if(EXPECT_FAIL)
+  if(status EQUAL 0)
+    message(FATAL_ERROR "expected a non-zero exit status, got 0")
+  endif()
+  string(REGEX MATCH "${EXPECT_FAIL}" found "${all}")
+  if(NOT found)
+    message(FATAL_ERROR "the output does not match the expected message: ${EXPECT_FAIL}")
+  endif()
+else()
+  if(NOT status EQUAL 0)
+    message(FATAL_ERROR "expected exit status 0, got ${status}")
+  endif()
+  if(NOT IS_DIRECTORY "${DIRECTORY}")
+    message(FATAL_ERROR "${DIRECTORY} was not created")
+  endif()
+  file(GLOB left LIST_DIRECTORIES true "${DIRECTORY}/*" "${DIRECTORY}/.*")
+  if(left)
+    message(FATAL_ERROR "files left in ${DIRECTORY}: ${left}")
+  endif()
+endif()
