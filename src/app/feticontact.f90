@@ -5,22 +5,24 @@
 program feticontact
   use, intrinsic :: iso_fortran_env, only: output_unit
   use kinds, only: path_len
-  use errors, only: collective_error, exit_input_error, exit_internal
+  use errors, only: collective_error, exit_input_error, exit_process
   use logger, only: logger_init, log_section, log_message, log_is_root
   use params, only: params_t, read_params, echo_params
+  use contact_run, only: run_contact_case
   use mpi_f08, only: MPI_Init, MPI_Finalize, MPI_COMM_WORLD, MPI_Comm_size
   implicit none
 
   type(params_t) :: p
   character(len=path_len) :: arg, file
   logical :: check_only
-  integer :: i, ierr, nranks
+  integer :: i, ierr, nranks, status
 
   call MPI_Init(ierr)
   call logger_init(MPI_COMM_WORLD)
   call MPI_Comm_size(MPI_COMM_WORLD, nranks, ierr)
 
   check_only = .false.
+  status = 0
   file = ''
   do i = 1, command_argument_count()
     call get_command_argument(i, arg)
@@ -30,7 +32,7 @@ program feticontact
     case ('-h', '--help')
       call log_message('usage: mpirun -n P feticontact [--check] input.nml')
       call MPI_Finalize(ierr)
-      stop
+      call exit_process(0)
     case default
       if (len_trim(file) > 0) call collective_error('more than one input file given; usage: '// &
         'mpirun -n P feticontact [--check] input.nml', MPI_COMM_WORLD, exit_input_error)
@@ -44,11 +46,8 @@ program feticontact
   call log_section('feticontact: settings used')
   if (log_is_root()) call echo_params(p, output_unit)
 
-  if (check_only) then
-    call log_message('input checked: OK')
-    call MPI_Finalize(ierr)
-    stop
-  end if
-  call collective_error('the solve is not implemented yet (input is valid; nothing was computed)', &
-                        MPI_COMM_WORLD, exit_internal)
+  if (.not. check_only) call run_contact_case(p, MPI_COMM_WORLD, status)
+  if (check_only) call log_message('input checked: OK')
+  call MPI_Finalize(ierr)
+  if (status /= 0) call exit_process(status)
 end program feticontact

@@ -7,12 +7,22 @@
 !> process exits with a non-zero status, without Open MPI's abort banner.
 module errors
   use, intrinsic :: iso_fortran_env, only: error_unit, output_unit
+  use, intrinsic :: iso_c_binding, only: c_int
   use mpi_f08, only: MPI_Comm, MPI_COMM_WORLD, MPI_Abort, MPI_Comm_rank, MPI_Finalize, &
                      MPI_Initialized, MPI_Finalized
   implicit none
   private
 
-  public :: fatal_error, collective_error, check_status
+  public :: fatal_error, collective_error, check_status, exit_process
+
+  interface
+    !> The C library's exit: ends the process with a status and no Fortran
+    !> runtime message (gfortran's ERROR STOP prints a backtrace with -fbacktrace).
+    subroutine c_exit(status) bind(C, name='exit')
+      import :: c_int
+      integer(c_int), value :: status
+    end subroutine c_exit
+  end interface
 
   integer, parameter, public :: exit_input_error = 2    !< bad input
   integer, parameter, public :: exit_not_converged = 3  !< a solver did not converge
@@ -59,8 +69,16 @@ contains
       flush (error_unit)
     end if
     call MPI_Finalize(ierr)
-    error stop code, quiet=.true.
+    call exit_process(code)
   end subroutine collective_error
+
+  !> End the process with `status` (after MPI_Finalize), without any message.
+  subroutine exit_process(status)
+    integer, intent(in) :: status
+    flush (output_unit)
+    flush (error_unit)
+    call c_exit(int(status, c_int))
+  end subroutine exit_process
 
   !> Abort with `message` when `status` is non-zero (for library return codes).
   subroutine check_status(status, message)

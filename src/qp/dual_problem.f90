@@ -8,6 +8,13 @@
 !> G~^T mu = G^T muhat with muhat = L^{-T} mu, so the factor L is never needed.
 !> The multiplier vector is distributed like the coarse vectors (the 6-blocks
 !> of this rank's subdomains); SMALBE only scales and adds it.
+!>
+!> Scaling: the QP handed to the solver is the one above divided by
+!> s = ||P F P|| (Hessian A/s, linear term b/s, penalty rho/s), so that its
+!> Hessian has norm ~1 and the projected gradient and ||G~ nu|| are measured in
+!> the same units (multipliers); without it the SMALBE stopping test compares a
+!> displacement with a force. The minimizer nu is the same; the multiplier of
+!> the scaled problem is muhat/s, and `unscaled_multiplier` gives muhat back.
 module dual_problem
   use kinds, only: dp, ip, MPI_REAL_DP
   use errors, only: fatal_error
@@ -19,7 +26,8 @@ module dual_problem
 
   type, extends(qp_problem_t), public :: dual_problem_t
     type(feti_t), pointer :: op => null()
-    real(dp) :: rho = 0                       !< penalty (regularization) of Eq. (8)
+    real(dp) :: rho = 0                       !< penalty (regularization) of Eq. (8), unscaled
+    real(dp) :: scale = 1                     !< s = ||P F P||: the QP is Eq. (8) divided by s
     real(dp), allocatable, private :: px(:), fpx(:), pfpx(:), gz(:), cz(:)
   contains
     procedure :: init
@@ -28,6 +36,7 @@ module dual_problem
     procedure :: eq_size
     procedure :: eq_residual
     procedure :: eq_apply_t
+    procedure :: unscaled_multiplier
     procedure :: free
   end type dual_problem_t
 
@@ -46,15 +55,17 @@ contains
     this%has_equality = .true.
     this%rho = rho_scale*op%norm_pfp
     if (.not. this%rho > 0) call fatal_error('dual_problem: ||P F P|| estimate is not positive')
+    this%scale = op%norm_pfp
     allocate (this%px(n), this%fpx(n), this%pfpx(n), this%gz(6*op%nlocal), this%cz(6*op%nlocal))
     ! b = P (d - F lambda~)
     call op%apply_f(op%lambda_tilde, this%fpx)
     this%fpx = op%d - this%fpx
     call op%project(this%fpx, this%b)
+    this%b = this%b/this%scale
     this%lower = merge(op%lower, no_lower_bound, op%is_contact)
   end subroutine init
 
-  !> y = P F P x + rho Q x, with Q x = x - P x.
+  !> y = (P F P x + rho Q x)/s, with Q x = x - P x.
   subroutine hessian(self, x, y)
     class(dual_problem_t), intent(inout) :: self
     real(dp), intent(in) :: x(:)
@@ -62,13 +73,22 @@ contains
     call self%op%project(x, self%px)
     call self%op%apply_f(self%px, self%fpx)
     call self%op%project(self%fpx, self%pfpx)
-    y = self%pfpx + self%rho*(x - self%px)
+    y = (self%pfpx + self%rho*(x - self%px))/self%scale
   end subroutine hessian
 
+  !> The penalty of the scaled QP: rho/s.
   real(dp) function penalty(self)
     class(dual_problem_t), intent(in) :: self
-    penalty = self%rho
+    penalty = self%rho/self%scale
   end function penalty
+
+  !> muhat of Eq. (8) from the multiplier of the scaled QP.
+  function unscaled_multiplier(self, muhat_scaled) result(muhat)
+    class(dual_problem_t), intent(in) :: self
+    real(dp), intent(in) :: muhat_scaled(:)
+    real(dp) :: muhat(size(muhat_scaled))
+    muhat = self%scale*muhat_scaled
+  end function unscaled_multiplier
 
   !> Length of this rank's part of the multiplier: 6 per local subdomain.
   integer(ip) function eq_size(self)

@@ -2,11 +2,14 @@
 !> reconstructed displacements u and the multipliers lambda; each residual is
 !> relative to the size of the terms it is made of:
 !> - equilibrium:      ||K u - f + B^T lambda|| / max(||K u||, ||f||, ||B^T lambda||)
-!> - equality:         ||B_E u - c_E|| / max(||c_E||, || |B_E| |u| ||)
-!> - feasibility:      ||max(B_I u - c_I, 0)|| / max(||c_I||, || |B_I| |u| ||)
+!> - equality:         ||B_E u - c_E|| / max(||c_E||, || |B_E| |u| ||, u_rms sqrt(n_E))
+!> - feasibility:      ||max(B_I u - c_I, 0)|| / max(||c_I||, || |B_I| |u| ||, u_rms sqrt(n_I))
 !> - dual_feasibility: ||min(lambda_I, 0)|| / ||lambda_I||
-!> - complementarity:  sum |lambda_i (B_i u - c_i)| / (||lambda_I|| max(||c_I||, || |B_I| |u| ||))
-!> (norms over all subdomains and rows of all ranks; 0/0 counts as 0).
+!> - complementarity:  sum |lambda_i (B_i u - c_i)| / (||lambda_I|| * the scale of feasibility)
+!> where u_rms is the root mean square of all displacement components: a row
+!> whose terms are all ~0 (a node in contact that does not move, with a zero
+!> gap) is measured against the typical size of the displacements, not 0.
+!> Norms are over all subdomains and rows of all ranks; 0/0 counts as 0.
 module kkt
   use kinds, only: dp, ip, MPI_REAL_DP
   use feti_operators, only: feti_t, local_field_t
@@ -39,7 +42,7 @@ contains
     type(kkt_residuals_t) :: res
     type(local_field_t), allocatable :: btl(:), absu(:)
     real(dp), allocatable :: ku(:), bu(:), babs(:), r(:)
-    real(dp) :: s(16)
+    real(dp) :: s(16), u_rms2, n_equality, scale_i
     integer(ip) :: ls, n
     integer :: ierr
 
@@ -57,6 +60,8 @@ contains
         s(4) = s(4) + sum(btl(ls)%v**2)
         deallocate (ku)
         absu(ls)%v = abs(u(ls)%v)
+        s(14) = s(14) + sum(u(ls)%v**2)
+        s(15) = s(15) + sub%ndof
       end associate
     end do
     call op%apply_b(u, bu)
@@ -72,13 +77,17 @@ contains
       s(11) = sum(min(lambda, 0.0_dp)**2, mask=contact)
       s(12) = sum(lambda**2, mask=contact)
       s(13) = sum(abs(lambda*r), mask=contact)
+      s(16) = count(contact)
     end associate
     call sum_all(op, s)
     res%equilibrium = ratio(sqrt(s(1)), sqrt(max(s(2), s(3), s(4))))
-    res%equality = ratio(sqrt(s(5)), sqrt(max(s(6), s(7))))
-    res%feasibility = ratio(sqrt(s(8)), sqrt(max(s(9), s(10))))
+    u_rms2 = s(14)/max(s(15), 1.0_dp)
+    n_equality = real(op%con%n_global, dp) - s(16)
+    res%equality = ratio(sqrt(s(5)), sqrt(max(s(6), s(7), u_rms2*n_equality)))
+    scale_i = sqrt(max(s(9), s(10), u_rms2*s(16)))
+    res%feasibility = ratio(sqrt(s(8)), scale_i)
     res%dual_feasibility = ratio(sqrt(s(11)), sqrt(s(12)))
-    res%complementarity = ratio(s(13), sqrt(s(12))*sqrt(max(s(9), s(10))))
+    res%complementarity = ratio(s(13), sqrt(s(12))*scale_i)
   end function check_kkt
 
   pure real(dp) function ratio(a, b)
