@@ -66,7 +66,7 @@ module params
     real(dp) :: eta_scale = 0.1_dp            !< inner precision eta = eta_scale ||b||
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| power method
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
-    character(len=name_len) :: local_ordering = 'amd'  !< 'amd' | 'metis'
+    character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
     real(dp) :: regularization = 1            !< rho_f relative to the mean diagonal of K
     logical :: monitor = .true.               !< one line per outer iteration
   end type solver_params_t

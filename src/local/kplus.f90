@@ -1,0 +1,459 @@
+!> Generalized inverse K^+ of a floating subdomain stiffness matrix by
+!> regularization with fixing nodes (DESIGN.md, "Facts the code relies on").
+!>
+!> K_reg = K + rho_f Q_F Q_F^T, where F is a small set of well separated
+!> "fixing" nodes of the subdomain and the columns of Q_F are an orthonormal
+!> basis of the rigid body motions restricted to the dofs of F
+!> (Q_F = R_F (R_F^T R_F)^{-1/2}, R_F = the rows of R at the dofs of F, the
+!> other rows zero). rho_f = regularization * mean(diag(K)).
+!>
+!> Why it is a generalized inverse: for b = K y, among the solutions u of
+!> K u = b (u0 + R g for any g) there is one with R_F^T u = 0 (solve the 6x6
+!> system R_F^T R_F g = -R_F^T u0, R_F of rank 6); it also solves K_reg u = b,
+!> and K_reg is positive definite (x^T K_reg x = 0 forces x = R g and
+!> R_F^T R g = R_F^T R_F g = 0, so g = 0). Hence K K_reg^{-1} K y = K y, and
+!> K^+ b is that solution whatever rho_f > 0 and whatever basis of span(R_F):
+!> they only change the conditioning of K_reg. The orthonormal basis makes
+!> the added block rho_f times an orthogonal projector, so rho_f really is the
+!> stiffness of the fixing springs (with R_F itself the block would shrink
+!> like |F|/nnodes, because R is orthonormal over the whole subdomain).
+!> Measured: ||K K^+ K x - K x|| / ||K x|| ~ 1e-15 for nel^3 = 1 ... 16^3,
+!> nu = 0.3 and 0.499, rho_f / mean(diag K) = 1e-3 ... 1e3.
+!>
+!> The added block couples only the dofs of F (3|F| <= 36 of them), so K_reg
+!> keeps the sparsity of K plus one small dense block. Its upper triangle goes
+!> to MUMPS (SYM = 1, MPI_COMM_SELF, one instance per subdomain kept for the
+!> repeated solves). Ordering: 'metis' = METIS nested dissection of the node
+!> graph of K_reg (3x smaller than the dof graph) expanded to the dofs of each
+!> node, given to MUMPS as its pivot order; 'amd' = MUMPS's AMD.
+module kplus
+  use kinds, only: dp, ip, i8
+  use errors, only: fatal_error
+  use subdomain, only: subdomain_t
+  use mumps_wrapper, only: mumps_t
+  use metis_wrapper, only: metis_node_nd
+  use mpi_f08, only: MPI_COMM_SELF
+  implicit none
+  private
+
+  !> Fixing nodes are added until the smallest eigenvalue of R_F^T R_F is at
+  !> least this fraction of the largest one ...
+  real(dp), parameter :: gram_ratio_wanted = 1.0e-2_dp
+  !> ... up to this many nodes; below `gram_ratio_min` R_F has no rank 6.
+  integer(ip), parameter :: max_fixing_nodes = 12
+  real(dp), parameter :: gram_ratio_min = 1.0e-12_dp
+
+  interface
+    subroutine dsyev(jobz, uplo, n, a, lda, w, work, lwork, info)
+      import :: dp
+      character(len=1), intent(in) :: jobz, uplo
+      integer, intent(in) :: n, lda, lwork
+      real(dp), intent(inout) :: a(lda, *)
+      real(dp), intent(out) :: w(*), work(*)
+      integer, intent(out) :: info
+    end subroutine dsyev
+  end interface
+
+  !> K^+ of one subdomain. Components are for reading (diagnostics, tests).
+  !> Do not copy a kplus_t by assignment (it holds a MUMPS instance).
+  type, public :: kplus_t
+    integer(ip) :: ndof = 0                       !< order of K
+    real(dp) :: rho = 0                           !< rho_f, stiffness of the fixing springs
+    real(dp) :: gram_ratio = 0                    !< min/max eigenvalue of R_F^T R_F
+    integer(ip), allocatable :: fixing_nodes(:)   !< local node numbers of F
+    type(mumps_t), private :: solver
+  contains
+    procedure :: init
+    procedure :: solve
+    procedure :: solve_many
+    procedure :: factor_bytes
+    procedure :: free
+  end type kplus_t
+
+contains
+
+  !> Factorize K_reg of `sub` (which must hold K and R). `regularization`:
+  !> rho_f relative to the mean diagonal of K (> 0; 1 is a good value).
+  !> `ordering`: 'amd' or 'metis'.
+  subroutine init(this, sub, regularization, ordering)
+    class(kplus_t), intent(inout) :: this
+    type(subdomain_t), intent(in) :: sub
+    real(dp), intent(in) :: regularization
+    character(len=*), intent(in) :: ordering
+    real(dp), allocatable :: block(:, :)
+    integer(ip), allocatable :: fixing_dofs(:), irn(:), jcn(:), perm(:)
+    real(dp), allocatable :: a(:)
+
+    call this%free()
+    call check_subdomain(sub)
+    if (.not. (regularization > 0)) call fatal_error('kplus: the regularization must be > 0')
+    if (ordering /= 'amd' .and. ordering /= 'metis') &
+      call fatal_error("kplus: unknown ordering '"//trim(ordering)//"' (amd or metis)")
+    this%ndof = sub%ndof
+    this%rho = regularization*mean_diagonal(sub)
+    if (.not. (this%rho > 0)) call fatal_error('kplus: K has no positive diagonal')
+
+    call choose_fixing_nodes(sub, this%fixing_nodes, this%gram_ratio)
+    call fixing_block(sub, this%fixing_nodes, this%rho, fixing_dofs, block)
+    call upper_coo(sub, fixing_dofs, block, irn, jcn, a)
+
+    call this%solver%init(MPI_COMM_SELF, spd=.true.)
+    call this%solver%set_centralized(sub%ndof, irn, jcn, a)
+    deallocate (irn, jcn, a)
+    if (ordering == 'metis') then
+      call node_nested_dissection(sub, this%fixing_nodes, perm)
+      call this%solver%set_ordering('metis', perm)
+    else
+      call this%solver%set_ordering('amd')
+    end if
+    call this%solver%factorize()
+  end subroutine init
+
+  !> x <- K^+ x (in place).
+  subroutine solve(this, x)
+    class(kplus_t), intent(inout) :: this
+    real(dp), intent(inout) :: x(:)
+    if (size(x) /= this%ndof) call fatal_error('kplus%solve: x must have ndof entries')
+    call this%solver%solve(x)
+  end subroutine solve
+
+  !> x(:, j) <- K^+ x(:, j) for every column j, in one MUMPS call.
+  subroutine solve_many(this, x)
+    class(kplus_t), intent(inout) :: this
+    real(dp), intent(inout) :: x(:, :)
+    if (size(x, 1) /= this%ndof) call fatal_error('kplus%solve_many: x must have ndof rows')
+    if (size(x, 2) == 0) return
+    call this%solver%solve(x)
+  end subroutine solve_many
+
+  !> Bytes of the factors of K_reg (see mumps_t%factor_bytes).
+  integer(i8) function factor_bytes(this)
+    class(kplus_t), intent(in) :: this
+    factor_bytes = this%solver%factor_bytes()
+  end function factor_bytes
+
+  !> Release the factorization. Safe on a never initialized object.
+  subroutine free(this)
+    class(kplus_t), intent(inout) :: this
+    call this%solver%free()
+    if (allocated(this%fixing_nodes)) deallocate (this%fixing_nodes)
+    this%ndof = 0
+    this%rho = 0
+    this%gram_ratio = 0
+  end subroutine free
+
+  ! ---------------------------------------------------------------- private
+
+  subroutine check_subdomain(sub)
+    type(subdomain_t), intent(in) :: sub
+    if (sub%ndof < 1 .or. sub%ndof /= 3*sub%nnodes) call fatal_error('kplus: subdomain without dofs')
+    if (.not. allocated(sub%K%rowptr) .or. sub%K%nrows /= sub%ndof .or. sub%K%ncols /= sub%ndof) &
+      call fatal_error('kplus: the subdomain has no stiffness matrix K (assemble it first)')
+    if (.not. allocated(sub%R)) call fatal_error('kplus: the subdomain has no kernel basis R')
+    if (size(sub%R, 1) /= sub%ndof .or. size(sub%R, 2) /= 6) &
+      call fatal_error('kplus: the kernel basis R must be ndof x 6')
+    if (.not. allocated(sub%coords)) call fatal_error('kplus: the subdomain has no coordinates')
+  end subroutine check_subdomain
+
+  real(dp) function mean_diagonal(sub)
+    type(subdomain_t), intent(in) :: sub
+    integer(ip) :: i, k
+    real(dp) :: s
+    s = 0
+    do i = 1, sub%ndof
+      do k = sub%K%rowptr(i), sub%K%rowptr(i + 1) - 1
+        if (sub%K%colind(k) == i) s = s + sub%K%values(k)
+      end do
+    end do
+    mean_diagonal = s/sub%ndof
+  end function mean_diagonal
+
+  !> Fixing nodes: the node farthest from the centroid, the node farthest from
+  !> it, the node that maximizes the triangle area with these two, the node
+  !> farthest from their plane; then, while R_F^T R_F is poorly conditioned,
+  !> the node farthest from all chosen ones. Works for any shape (METIS-cut
+  !> subdomains too): only distances between nodes are used.
+  subroutine choose_fixing_nodes(sub, nodes, ratio)
+    type(subdomain_t), intent(in) :: sub
+    integer(ip), allocatable, intent(out) :: nodes(:)
+    real(dp), intent(out) :: ratio
+    integer(ip) :: chosen(max_fixing_nodes), nf, a, best, limit
+    real(dp) :: c(3), x(3), normal(3), score, best_score, diameter
+    real(dp), allocatable :: mindist(:)
+
+    associate (xyz => sub%coords, nn => sub%nnodes)
+      limit = min(max_fixing_nodes, nn)
+      c = sum(xyz, dim=2)/nn
+      chosen(1) = farthest_from(c)
+      chosen(2) = farthest_from(xyz(:, chosen(1)))
+      nf = 2
+      diameter = norm2(xyz(:, chosen(2)) - xyz(:, chosen(1)))
+      ! largest triangle with the first two
+      best = 0
+      best_score = 0
+      do a = 1, nn
+        score = norm2(cross(xyz(:, a) - xyz(:, chosen(1)), xyz(:, chosen(2)) - xyz(:, chosen(1))))
+        if (score > best_score) then
+          best_score = score
+          best = a
+        end if
+      end do
+      if (best > 0 .and. best_score > 1.0e-8_dp*diameter**2) then
+        nf = nf + 1
+        chosen(nf) = best
+        ! farthest from the plane of the three
+        normal = cross(xyz(:, chosen(2)) - xyz(:, chosen(1)), xyz(:, chosen(3)) - xyz(:, chosen(1)))
+        normal = normal/norm2(normal)
+        best = 0
+        best_score = 0
+        do a = 1, nn
+          score = abs(dot_product(xyz(:, a) - xyz(:, chosen(1)), normal))
+          if (score > best_score) then
+            best_score = score
+            best = a
+          end if
+        end do
+        if (best > 0 .and. best_score > 1.0e-8_dp*diameter .and. nf < limit) then
+          nf = nf + 1
+          chosen(nf) = best
+        end if
+      end if
+
+      ! more nodes while R_F^T R_F is poorly conditioned: farthest-point sampling
+      allocate (mindist(nn))
+      do a = 1, nn
+        mindist(a) = huge(1.0_dp)
+      end do
+      do a = 1, nf
+        call update_mindist(chosen(a))
+      end do
+      ratio = gram_ratio_of(sub, chosen(1:nf))
+      do while (ratio < gram_ratio_wanted .and. nf < limit)
+        best = maxloc(mindist, dim=1)
+        if (mindist(best) <= 0) exit
+        nf = nf + 1
+        chosen(nf) = best
+        call update_mindist(best)
+        ratio = gram_ratio_of(sub, chosen(1:nf))
+      end do
+      if (ratio < gram_ratio_min) then
+        block
+          character(len=160) :: msg
+          write (msg, '(a,i0,a,es9.2)') 'kplus: no set of fixing nodes of subdomain ', sub%id, &
+            ' fixes its rigid body motions; eigenvalue ratio of R_F^T R_F ', ratio
+          call fatal_error(trim(msg))
+        end block
+      end if
+      nodes = chosen(1:nf)
+    end associate
+
+  contains
+
+    integer(ip) function farthest_from(p)
+      real(dp), intent(in) :: p(3)
+      integer(ip) :: b
+      real(dp) :: d, dmax
+      farthest_from = 1
+      dmax = -1
+      do b = 1, sub%nnodes
+        d = sum((sub%coords(:, b) - p)**2)
+        if (d > dmax) then
+          dmax = d
+          farthest_from = b
+        end if
+      end do
+    end function farthest_from
+
+    subroutine update_mindist(node)
+      integer(ip), intent(in) :: node
+      integer(ip) :: b
+      x = sub%coords(:, node)
+      do b = 1, sub%nnodes
+        mindist(b) = min(mindist(b), norm2(sub%coords(:, b) - x))
+      end do
+    end subroutine update_mindist
+  end subroutine choose_fixing_nodes
+
+  pure function cross(u, v) result(w)
+    real(dp), intent(in) :: u(3), v(3)
+    real(dp) :: w(3)
+    w = [u(2)*v(3) - u(3)*v(2), u(3)*v(1) - u(1)*v(3), u(1)*v(2) - u(2)*v(1)]
+  end function cross
+
+  !> The rows of R at the dofs of `nodes`: (3*size(nodes), 6).
+  function restricted_r(sub, nodes) result(rf)
+    type(subdomain_t), intent(in) :: sub
+    integer(ip), intent(in) :: nodes(:)
+    real(dp) :: rf(3*size(nodes), 6)
+    integer(ip) :: i, c
+    do i = 1, size(nodes)
+      do c = 1, 3
+        rf(3*(i - 1) + c, :) = sub%R(3*(nodes(i) - 1) + c, :)
+      end do
+    end do
+  end function restricted_r
+
+  !> Eigenvalues (ascending) and eigenvectors of the 6x6 Gram matrix R_F^T R_F.
+  subroutine gram_eigen(rf, lambda, v)
+    real(dp), intent(in) :: rf(:, :)
+    real(dp), intent(out) :: lambda(6), v(6, 6)
+    real(dp) :: work(64)
+    integer :: info
+    v = matmul(transpose(rf), rf)
+    call dsyev('V', 'U', 6, v, 6, lambda, work, size(work), info)
+    if (info /= 0) call fatal_error('kplus: LAPACK dsyev failed on the 6x6 Gram matrix of R_F')
+  end subroutine gram_eigen
+
+  real(dp) function gram_ratio_of(sub, nodes)
+    type(subdomain_t), intent(in) :: sub
+    integer(ip), intent(in) :: nodes(:)
+    real(dp) :: lambda(6), v(6, 6)
+    call gram_eigen(restricted_r(sub, nodes), lambda, v)
+    gram_ratio_of = 0
+    if (lambda(6) > 0) gram_ratio_of = max(lambda(1), 0.0_dp)/lambda(6)
+  end function gram_ratio_of
+
+  !> The dense block rho Q_F Q_F^T on the dofs of the fixing nodes, the dofs
+  !> in ascending order.
+  subroutine fixing_block(sub, nodes, rho, dofs, block)
+    type(subdomain_t), intent(in) :: sub
+    integer(ip), intent(in) :: nodes(:)
+    real(dp), intent(in) :: rho
+    integer(ip), allocatable, intent(out) :: dofs(:)
+    real(dp), allocatable, intent(out) :: block(:, :)
+    integer(ip), allocatable :: sorted(:)
+    real(dp), allocatable :: rf(:, :), q(:, :)
+    real(dp) :: lambda(6), v(6, 6)
+    integer(ip) :: i, j, c, nf
+
+    nf = size(nodes)
+    sorted = nodes
+    do i = 2, nf                       ! insertion sort of at most 12 nodes
+      j = i
+      do while (j > 1)
+        if (sorted(j - 1) <= sorted(j)) exit
+        sorted(j - 1:j) = [sorted(j), sorted(j - 1)]
+        j = j - 1
+      end do
+    end do
+    allocate (dofs(3*nf))
+    do i = 1, nf
+      do c = 1, 3
+        dofs(3*(i - 1) + c) = 3*(sorted(i) - 1) + c
+      end do
+    end do
+    rf = restricted_r(sub, sorted)
+    call gram_eigen(rf, lambda, v)
+    ! Q_F = R_F V diag(lambda)^(-1/2): orthonormal columns spanning R_F
+    do j = 1, 6
+      v(:, j) = v(:, j)/sqrt(lambda(j))
+    end do
+    q = matmul(rf, v)
+    block = rho*matmul(q, transpose(q))
+  end subroutine fixing_block
+
+  !> Upper triangle of K_reg in coordinate form: the entries of K with
+  !> column >= row, then the upper triangle of the fixing block (MUMPS sums
+  !> the duplicates).
+  subroutine upper_coo(sub, fixing_dofs, block, irn, jcn, a)
+    type(subdomain_t), intent(in) :: sub
+    integer(ip), intent(in) :: fixing_dofs(:)
+    real(dp), intent(in) :: block(:, :)
+    integer(ip), allocatable, intent(out) :: irn(:), jcn(:)
+    real(dp), allocatable, intent(out) :: a(:)
+    integer(ip) :: i, j, k, nz, nb, nupper
+
+    nb = size(fixing_dofs)
+    nupper = 0
+    do i = 1, sub%ndof
+      do k = sub%K%rowptr(i), sub%K%rowptr(i + 1) - 1
+        if (sub%K%colind(k) >= i) nupper = nupper + 1
+      end do
+    end do
+    allocate (irn(nupper + nb*(nb + 1)/2), jcn(nupper + nb*(nb + 1)/2), a(nupper + nb*(nb + 1)/2))
+    nz = 0
+    do i = 1, sub%ndof
+      do k = sub%K%rowptr(i), sub%K%rowptr(i + 1) - 1
+        if (sub%K%colind(k) >= i) then
+          nz = nz + 1
+          irn(nz) = i
+          jcn(nz) = sub%K%colind(k)
+          a(nz) = sub%K%values(k)
+        end if
+      end do
+    end do
+    do j = 1, nb
+      do i = 1, j
+        nz = nz + 1
+        irn(nz) = fixing_dofs(i)
+        jcn(nz) = fixing_dofs(j)
+        a(nz) = block(i, j)
+      end do
+    end do
+  end subroutine upper_coo
+
+  !> Pivot order of the dofs (perm(dof) = its position) from METIS nested
+  !> dissection of the node graph of K_reg: nodes coupled by K, plus the clique
+  !> of the fixing nodes. The three dofs of a node stay consecutive.
+  subroutine node_nested_dissection(sub, fixing, perm)
+    type(subdomain_t), intent(in) :: sub
+    integer(ip), intent(in) :: fixing(:)
+    integer(ip), allocatable, intent(out) :: perm(:)
+    integer(ip), allocatable :: xadj(:), adjncy(:), mark(:), order(:), position(:)
+    integer(ip) :: nn, a, b, c, k, p, row, f, g
+    logical :: is_fixing
+
+    nn = sub%nnodes
+    allocate (xadj(nn + 1), mark(nn), order(nn), position(nn))
+    ! K's pattern has at most (27 neighbours * 3) entries per row for Q1; size
+    ! the adjacency from the rows, plus the clique of the fixing nodes
+    allocate (adjncy(sub%K%nnz()/3 + nn + size(fixing)**2))
+    mark = 0
+    p = 0
+    xadj(1) = 1
+    do a = 1, nn
+      mark(a) = a                       ! no self loop
+      do c = 1, 3
+        row = 3*(a - 1) + c
+        do k = sub%K%rowptr(row), sub%K%rowptr(row + 1) - 1
+          b = (sub%K%colind(k) - 1)/3 + 1
+          if (mark(b) /= a) then
+            mark(b) = a
+            call push(b)
+          end if
+        end do
+      end do
+      is_fixing = any(fixing == a)
+      if (is_fixing) then
+        do f = 1, size(fixing)
+          g = fixing(f)
+          if (mark(g) /= a) then
+            mark(g) = a
+            call push(g)
+          end if
+        end do
+      end if
+      xadj(a + 1) = p + 1
+    end do
+    call metis_node_nd(nn, xadj, adjncy(1:p), order, position)
+    allocate (perm(3*nn))
+    do a = 1, nn
+      do c = 1, 3
+        perm(3*(a - 1) + c) = 3*(position(a) - 1) + c
+      end do
+    end do
+  contains
+    subroutine push(node)
+      integer(ip), intent(in) :: node
+      if (p == size(adjncy)) call grow()
+      p = p + 1
+      adjncy(p) = node
+    end subroutine push
+    subroutine grow()
+      integer(ip), allocatable :: bigger(:)
+      allocate (bigger(2*size(adjncy) + 16))
+      bigger(1:p) = adjncy(1:p)
+      call move_alloc(bigger, adjncy)
+    end subroutine grow
+  end subroutine node_nested_dissection
+end module kplus

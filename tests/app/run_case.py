@@ -1,0 +1,214 @@
+#!/usr/bin/python3
+"""Run feticontact end to end on a case and check its outputs.
+
+    run_case.py --program feticontact --mpiexec mpiexec --ranks 2 --input inputs/block.nml \
+        --workdir DIR [--set group:variable=value ...] [--expect-exit N] [--expect-message REGEX] \
+        [--check block_exact:TOL] [--check report] [--check xdmf] [--check same_as:DIR:TOL]
+
+The input file is copied with the --set overrides merged into its groups and
+with &output directory pointing into DIR. Every check derives its expected
+values independently (the exact solution of CASES.md, the file formats), never
+from numbers the program printed. Exit status 0 when every check passes.
+"""
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+
+import h5py
+import numpy as np
+
+FAILURES = []
+PASSED = []
+
+
+def check(condition, what):
+    print(("ok   " if condition else "FAIL ") + what)
+    (PASSED if condition else FAILURES).append(what)
+
+
+def parse_namelist(text):
+    """Groups of a simple namelist file: {group: [(variable, raw value text)]}."""
+    text = re.sub(r"!.*", "", text)
+    groups = {}
+    for m in re.finditer(r"&(\w+)(.*?)/", text, re.S):
+        body = m.group(2)
+        starts = [a.start() for a in re.finditer(r"\w+(\([^)]*\))?\s*=", body)]
+        items = []
+        for i, s in enumerate(starts):
+            piece = body[s:starts[i + 1] if i + 1 < len(starts) else len(body)].strip().rstrip(",")
+            name, value = piece.split("=", 1)
+            items.append((name.strip().lower(), value.strip()))
+        groups[m.group(1).lower()] = items
+    return groups
+
+
+def write_namelist(groups, path):
+    with open(path, "w") as f:
+        for g, items in groups.items():
+            f.write("&%s %s /\n" % (g, ", ".join("%s = %s" % kv for kv in items)))
+
+
+def merged_input(args):
+    with open(args.input) as f:
+        groups = parse_namelist(f.read())
+    overrides = ["output:directory='%s'" % os.path.join(args.workdir, "out")] + list(args.set)
+    for s in overrides:
+        gv, value = s.split("=", 1)
+        g, v = gv.split(":")
+        items = [kv for kv in groups.get(g, []) if kv[0] != v] + [(v, value)]
+        groups[g] = items
+    os.makedirs(args.workdir, exist_ok=True)
+    path = os.path.join(args.workdir, "case.nml")
+    write_namelist(groups, path)
+    return path, groups
+
+
+def value_of(groups, g, v, default):
+    for name, value in groups.get(g, []):
+        if name == v:
+            return value
+    return default
+
+
+def fields(outdir):
+    files = [f for f in os.listdir(outdir) if f.endswith(".h5")]
+    assert len(files) == 1, "expected one .h5 file in %s, found %s" % (outdir, files)
+    return h5py.File(os.path.join(outdir, files[0]), "r")
+
+
+def check_block_exact(outdir, groups, tol):
+    """CASES.md `block`: u = (nu p x/E, nu p y/E, -p z/E), contact pressure p."""
+    p = float(value_of(groups, "load", "top_pressure", "0").replace("d", "e"))
+    young = float(value_of(groups, "material", "young", "2.1e5"))
+    nu = float(value_of(groups, "material", "poisson", "0.3"))
+    with fields(outdir) as h5:
+        x = h5["coordinates"][...]
+        u = h5["displacement"][...]
+        exact = np.column_stack([nu * p * x[:, 0] / young, nu * p * x[:, 1] / young, -p * x[:, 2] / young])
+        err = np.abs(u - exact).max() / np.abs(exact).max()
+        check(err <= tol, "block: max |u - u_exact| / max |u_exact| = %.3e <= %.1e" % (err, tol))
+        pressure = h5["contact_pressure"][...]
+        perr = np.abs(pressure - p).max() / p
+        check(perr <= max(tol, 1e-8) * 100, "block: contact pressure = p, max rel. error %.3e" % perr)
+        vm = h5["von_mises"][...]
+        check(np.abs(vm - p).max() / p <= max(tol, 1e-8) * 100, "block: von Mises = p in every element")
+
+
+def check_report(outdir, ranks):
+    with open(os.path.join(outdir, "report.json")) as f:
+        r = json.load(f)
+    need = {
+        "case": ["mesh", "material", "solver", "output"],
+        "sizes": ["subdomains", "ranks", "primal_dofs", "dual_dofs", "coarse_dim", "contact_rows",
+                  "active_contact"],
+        "solver": ["converged", "outer_iterations", "hessian_multiplications", "cg_steps", "expansion_steps",
+                   "proportioning_steps", "projected_gradient", "equality_residual"],
+        "kkt": ["equilibrium", "equality", "feasibility", "dual_feasibility", "complementarity"],
+        "reconstruction": ["alpha_difference", "new", "standard"],
+        "timings": ["solve", "total"],
+        "contact": ["total_force", "max_pressure", "active_nodes", "contact_radius"],
+        "memory": ["peak_rss_bytes"],
+    }
+    for key, subkeys in need.items():
+        check(key in r, "report has '%s'" % key)
+        for s in subkeys:
+            check(s in r.get(key, {}), "report has '%s.%s'" % (key, s))
+    s, sol = r["sizes"], r["solver"]
+    check(s["ranks"] == ranks, "sizes.ranks == %d" % ranks)
+    check(s["coarse_dim"] == 6 * s["subdomains"], "coarse_dim = 6 * subdomains")
+    check(s["active_contact"] <= s["contact_rows"], "active_contact <= contact_rows")
+    check(s["dual_dofs"] >= s["contact_rows"], "dual_dofs >= contact_rows")
+    check(sol["converged"] is True, "solver converged")
+    check(sol["hessian_multiplications"] >= sol["outer_iterations"] >= 1, "hessian mults >= outer its >= 1")
+    check(sol["cg_steps"] + sol["expansion_steps"] + sol["proportioning_steps"] <= sol["hessian_multiplications"],
+          "steps <= hessian multiplications")
+    kkt_tol = r["case"]["reconstruction"]["kkt_tol"]
+    check(all(v <= kkt_tol for k, v in r["kkt"].items() if k != "passed"), "KKT residuals <= kkt_tol")
+    t = r["timings"]
+    check(all(t[k]["min"] <= t[k]["mean"] * (1 + 1e-12) <= t[k]["max"] * (1 + 1e-12) for k in t),
+          "timings: min <= mean <= max")
+    check(t["solve"]["max"] <= t["total"]["max"], "solve time <= total time")
+    check(r["memory"]["peak_rss_bytes"]["max"] > 0, "peak RSS reported")
+    force = r["contact"]["total_force"]
+    check(force >= 0, "total contact force >= 0")
+
+
+def check_xdmf(outdir):
+    files = [f for f in os.listdir(outdir) if f.endswith(".xdmf")]
+    check(len(files) == 1, "one .xdmf file")
+    tree = ET.parse(os.path.join(outdir, files[0]))
+    items = [e for e in tree.iter() if e.tag == "DataItem"]
+    check(len(items) >= 4, "xdmf has DataItems")
+    for item in items:
+        ref = item.text.strip()
+        name, path = ref.split(":")
+        dims = tuple(int(d) for d in item.get("Dimensions").split())
+        with h5py.File(os.path.join(outdir, name), "r") as h5:
+            check(path in h5, "xdmf reference %s exists" % ref)
+            if path in h5:
+                check(h5[path].shape == dims, "%s has the dimensions %s" % (ref, dims))
+    check(not any(f.endswith(".tmp") for f in os.listdir(outdir)), "no temporary files left")
+
+
+def displacement_by_position(outdir):
+    with fields(outdir) as h5:
+        x = h5["coordinates"][...]
+        u = h5["displacement"][...]
+    keys = np.round(x * 1e9).astype(np.int64)
+    return {tuple(k): v for k, v in zip(keys, u)}
+
+
+def check_same_as(outdir, other, tol):
+    a, b = displacement_by_position(outdir), displacement_by_position(other)
+    check(set(a) == set(b), "same node positions as %s" % other)
+    scale = max(np.abs(v).max() for v in b.values())
+    diff = max(np.abs(a[k] - b[k]).max() for k in a if k in b)
+    check(diff <= tol * scale, "same displacements as %s: max diff / max |u| = %.3e <= %.1e" % (other, diff / scale, tol))
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--program", required=True)
+    ap.add_argument("--mpiexec", required=True)
+    ap.add_argument("--ranks", type=int, default=1)
+    ap.add_argument("--input", required=True)
+    ap.add_argument("--workdir", required=True)
+    ap.add_argument("--set", action="append", default=[])
+    ap.add_argument("--expect-exit", type=int, default=0)
+    ap.add_argument("--expect-message", default=None)
+    ap.add_argument("--check", action="append", default=[])
+    ap.add_argument("--timeout", type=int, default=600)
+    args = ap.parse_args()
+
+    path, groups = merged_input(args)
+    cmd = [args.mpiexec, "--oversubscribe", "--bind-to", "none", "-n", str(args.ranks), args.program, path]
+    print("running:", " ".join(cmd))
+    run = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout)
+    out = run.stdout + run.stderr
+    print(out[-6000:])
+    check(run.returncode == args.expect_exit, "exit status %d (expected %d)" % (run.returncode, args.expect_exit))
+    if args.expect_message:
+        check(re.search(args.expect_message, out) is not None, "output matches %r" % args.expect_message)
+    outdir = os.path.join(args.workdir, "out")
+    for c in args.check:
+        kind, *rest = c.split(":")
+        if kind == "block_exact":
+            check_block_exact(outdir, groups, float(rest[0]))
+        elif kind == "report":
+            check_report(outdir, args.ranks)
+        elif kind == "xdmf":
+            check_xdmf(outdir)
+        elif kind == "same_as":
+            check_same_as(outdir, os.path.join(rest[0], "out"), float(rest[1]))
+        else:
+            check(False, "unknown check %s" % kind)
+    print("%d passed, %d failed" % (len(PASSED), len(FAILURES)))
+    sys.exit(1 if FAILURES else 0)
+
+
+if __name__ == "__main__":
+    main()
