@@ -1,0 +1,657 @@
+!> MPRGP: modified proportioning with reduced gradient projections, for
+!>
+!>     min 1/2 x^T A x - c^T x   s.t.  x >= l,
+!>
+!> after Dostal and Schoeberl (2005) and Dostal, "Optimal Quadratic
+!> Programming Algorithms" (2009). With g = A x - c, the free gradient phi,
+!> the chopped gradient beta and the projected gradient g^P are
+!>
+!>     phi_i  = g_i            if x_i > l_i, else 0
+!>     beta_i = min(g_i, 0)    if x_i = l_i, else 0
+!>     g^P    = phi + beta,
+!>
+!> and the reduced free gradient is phit_i = min((x_i - l_i)/alpha_bar, phi_i).
+!> An iterate is proportional when ||beta||^2 <= Gamma^2 phit^T phi. Each
+!> iteration makes one of three steps:
+!> - CG step (proportional, the CG step length alpha_cg = g^T p / p^T A p is at
+!>   most the largest feasible step alpha_f): x <- x - alpha_cg p, p conjugate;
+!> - expansion step (proportional, alpha_cg > alpha_f): the half step
+!>   x <- x - alpha_f p to the boundary, then x <- P(x - alpha_e phi(x)) with P
+!>   the projection onto the bounds, the gradient recomputed, p <- phi;
+!> - proportioning step (not proportional): exact line search along beta
+!>   (feasible: beta <= 0 lives on the active set), p <- phi.
+!>
+!> Expansion step length alpha_e:
+!> - 'fixed': alpha_e = alpha_bar = alpha_scale / ||A|| (||A|| from the
+!>   caller, e.g. a power method); alpha_scale in (0, 2] keeps the cost
+!>   decreasing when ||A|| is not underestimated;
+!> - 'optimal': alpha_e = phi^T g / phi^T A phi, the minimizer of the cost
+!>   along -phi without bounds, then projected. The cost f = 1/2 x^T (g - c)
+!>   of the projected point is compared with that of the half step; if it did
+!>   not decrease, the step is redone with alpha_bar (counted in
+!>   n_expansion_fallback). It costs one more Hessian multiplication than
+!>   'fixed' (two more on a fallback).
+!>
+!> The stopping rule is an object (`mprgp_stop_t`) asked every iteration with
+!> the current x and ||g^P||, so that SMALBE can stop the inner loop on
+!> ||g^P|| <= min(M ||C x||, eta). The stand-alone `solve` stops on
+!> ||g^P|| <= tol ||b|| (`mprgp_abs_stop_t`). The core, `minimize`, takes the
+!> linear term c as an argument (SMALBE passes b - C^T mu).
+!>
+!> Safeguards: every iterate is kept feasible (x <- max(x, l) after each
+!> update, which only removes round-off); ||g^P|| and every step length are
+!> checked for NaN/Inf each iteration, before they are used, and the solver
+!> stops with qp_status_not_finite; p^T A p <= 0 stops with
+!> qp_status_breakdown; the Hessian multiplications of one call never exceed
+!> its budget (qp_status_max_hessian). x is never left non-finite.
+!>
+!> Communication per CG step: one MPI_Allreduce for the gradient split
+!> (||phi||^2, ||beta||^2, phit^T phi and phi^T A p fused), one for p^T A p
+!> with g^T p, one MIN for alpha_f, plus the Hessian. The sums are
+!> compensated (qp_problem: compensated_add, reduce_sums), so the iterates do
+!> not depend on the number of ranks when the Hessian's result does not.
+!>
+!> Work vectors (5 of the local length) are allocated on the first call and
+!> kept (no allocation in the iteration).
+module mprgp
+  use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_is_nan
+  use kinds, only: dp, ip, name_len
+  use errors, only: fatal_error
+  use logger, only: log_message
+  use params, only: solver_params_t
+  use qp_problem, only: qp_problem_t, qp_solver_t, no_lower_bound, compensated_add, qp_status_converged, &
+                        qp_status_max_hessian, qp_status_not_finite, qp_status_breakdown, &
+                        qp_status_incompatible, qp_status_not_run, qp_message_len
+  implicit none
+  private
+
+  !> A stopping rule asked once per iteration (and at the start) by minimize.
+  type, abstract, public :: mprgp_stop_t
+  contains
+    procedure(stop_test_iface), deferred :: test
+  end type mprgp_stop_t
+
+  abstract interface
+    !> Set `stop` when the iterate x with projected gradient norm `gp_norm`
+    !> is accurate enough. Collective over problem%comm (may communicate).
+    subroutine stop_test_iface(self, problem, x, gp_norm, stop)
+      import :: mprgp_stop_t, qp_problem_t, dp
+      class(mprgp_stop_t), intent(inout) :: self
+      class(qp_problem_t), intent(inout) :: problem
+      real(dp), intent(in) :: x(:)
+      real(dp), intent(in) :: gp_norm
+      logical, intent(out) :: stop
+    end subroutine stop_test_iface
+  end interface
+
+  !> Stop when ||g^P|| <= tol_abs.
+  type, extends(mprgp_stop_t), public :: mprgp_abs_stop_t
+    real(dp) :: tol_abs = 0
+  contains
+    procedure :: test => abs_stop_test
+  end type mprgp_abs_stop_t
+
+  !> The MPRGP solver. Counters and gp_norm describe the last call of
+  !> `solve` or `minimize` (SMALBE sums them over its inner solves).
+  type, extends(qp_solver_t), public :: mprgp_t
+    real(dp) :: gamma = 1                      !< proportioning parameter Gamma > 0
+    real(dp) :: alpha_scale = 1.9_dp           !< alpha_bar = alpha_scale / a_norm
+    real(dp) :: a_norm = 0                     !< ||A|| (an estimate from above is safe)
+    real(dp) :: alpha_bar = 0                  !< fixed expansion step length
+    character(len=name_len) :: expansion = 'fixed'  !< 'fixed' | 'optimal'
+    real(dp) :: tol = 1.0e-6_dp                !< stand-alone solve: stop at ||g^P|| <= tol ||b||
+    integer(ip) :: max_hessian = 20000         !< stand-alone solve: Hessian multiplication cap
+    real(dp) :: tol_abs = 0                    !< absolute tolerance used by the last solve
+    integer(ip) :: n_iterations = 0            !< steps of the last call (= cg + expansion + proportioning)
+    integer(ip) :: n_cg = 0                    !< CG steps
+    integer(ip) :: n_expansion = 0             !< expansion steps
+    integer(ip) :: n_proportioning = 0         !< proportioning steps
+    integer(ip) :: n_expansion_fallback = 0    !< 'optimal' expansions redone with alpha_bar
+    real(dp), allocatable, private :: p(:), ap(:), w_phi(:), w_x(:), w_g(:)
+  contains
+    procedure :: init => mprgp_init
+    procedure :: init_from_params => mprgp_init_from_params
+    procedure :: free => mprgp_free
+    procedure :: solve => mprgp_solve
+    procedure :: is_compatible => mprgp_is_compatible
+    procedure :: minimize
+  end type mprgp_t
+
+contains
+
+  subroutine abs_stop_test(self, problem, x, gp_norm, stop)
+    class(mprgp_abs_stop_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(in) :: gp_norm
+    logical, intent(out) :: stop
+    stop = gp_norm <= self%tol_abs
+  end subroutine abs_stop_test
+
+  !> Set the parameters. a_norm: ||A|| > 0; tol: relative tolerance of the
+  !> stand-alone solve; max_hessian >= 0; gamma (default 1); alpha_scale in
+  !> (0, 2] (default 1.9); expansion 'fixed' (default) or 'optimal'.
+  subroutine mprgp_init(self, a_norm, tol, max_hessian, gamma, alpha_scale, expansion, monitor)
+    class(mprgp_t), intent(inout) :: self
+    real(dp), intent(in) :: a_norm, tol
+    integer(ip), intent(in) :: max_hessian
+    real(dp), intent(in), optional :: gamma, alpha_scale
+    character(len=*), intent(in), optional :: expansion
+    logical, intent(in), optional :: monitor
+
+    call self%free()
+    self%a_norm = a_norm
+    self%tol = tol
+    self%max_hessian = max_hessian
+    self%gamma = 1
+    if (present(gamma)) self%gamma = gamma
+    self%alpha_scale = 1.9_dp
+    if (present(alpha_scale)) self%alpha_scale = alpha_scale
+    self%expansion = 'fixed'
+    if (present(expansion)) self%expansion = expansion
+    self%monitor = .false.
+    if (present(monitor)) self%monitor = monitor
+
+    if (.not. (a_norm > 0 .and. a_norm <= huge(a_norm))) call fatal_error('mprgp: ||A|| must be finite and > 0')
+    if (.not. (tol >= 0 .and. tol < 1)) call fatal_error('mprgp: tol must be in [0, 1)')
+    if (max_hessian < 0) call fatal_error('mprgp: max_hessian must be >= 0')
+    if (.not. (self%gamma > 0)) call fatal_error('mprgp: gamma must be > 0')
+    if (.not. (self%alpha_scale > 0 .and. self%alpha_scale <= 2)) &
+      call fatal_error('mprgp: alpha_scale must be in (0, 2]')
+    if (self%expansion /= 'fixed' .and. self%expansion /= 'optimal') &
+      call fatal_error("mprgp: expansion must be 'fixed' or 'optimal', got '"//trim(self%expansion)//"'")
+    self%alpha_bar = self%alpha_scale/self%a_norm
+  end subroutine mprgp_init
+
+  !> Parameters from &solver (tol, max_hessian, gamma, alpha_scale, expansion, monitor).
+  subroutine mprgp_init_from_params(self, sp, a_norm)
+    class(mprgp_t), intent(inout) :: self
+    type(solver_params_t), intent(in) :: sp
+    real(dp), intent(in) :: a_norm
+    call self%init(a_norm, sp%tol, sp%max_hessian, sp%gamma, sp%alpha_scale, sp%expansion, sp%monitor)
+  end subroutine mprgp_init_from_params
+
+  subroutine mprgp_free(self)
+    class(mprgp_t), intent(inout) :: self
+    if (allocated(self%p)) deallocate (self%p)
+    if (allocated(self%ap)) deallocate (self%ap)
+    if (allocated(self%w_phi)) deallocate (self%w_phi)
+    if (allocated(self%w_x)) deallocate (self%w_x)
+    if (allocated(self%w_g)) deallocate (self%w_g)
+    if (allocated(self%gradient)) deallocate (self%gradient)
+    self%status = qp_status_not_run
+    self%message = 'not run'
+  end subroutine mprgp_free
+
+  !> MPRGP handles bound constraints only.
+  logical function mprgp_is_compatible(self, problem, reason)
+    class(mprgp_t), intent(in) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    character(len=*), intent(out) :: reason
+    reason = ''
+    mprgp_is_compatible = .false.
+    if (self%a_norm <= 0) then
+      reason = 'MPRGP is not initialized (call init first)'
+    else if (problem%has_equality) then
+      reason = 'MPRGP handles bound constraints only; this problem has the equality constraint C x = 0 '// &
+               '(use SMALBE)'
+    else if (.not. (allocated(problem%b) .and. allocated(problem%lower))) then
+      reason = 'the problem has no b or lower bounds (not initialized)'
+    else if (size(problem%b) < problem%n .or. size(problem%lower) < problem%n) then
+      reason = 'the problem has b or lower bounds shorter than its local length n'
+    else
+      mprgp_is_compatible = .true.
+    end if
+  end function mprgp_is_compatible
+
+  !> Stand-alone solve: x <- P(x), then MPRGP until ||g^P|| <= tol ||b||
+  !> (tol itself when b = 0) or max_hessian multiplications.
+  subroutine mprgp_solve(self, problem, x)
+    class(mprgp_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(inout) :: x(:)
+    character(len=qp_message_len) :: reason
+    type(mprgp_abs_stop_t) :: rule
+    real(dp) :: norm_b
+    character(len=200) :: buf
+
+    if (.not. self%is_compatible(problem, reason)) then
+      self%status = qp_status_incompatible
+      self%message = 'problem refused: '//trim(reason)
+      if (self%monitor) call log_message('MPRGP: '//trim(self%message))
+      return
+    end if
+    if (size(x) < problem%n) call fatal_error('mprgp: x shorter than the local length of the problem')
+    call ensure_size(self%gradient, problem%n)
+    call problem%project(x)
+    norm_b = problem%norm(problem%b)
+    self%tol_abs = self%tol*norm_b
+    if (norm_b <= 0) self%tol_abs = self%tol
+    rule%tol_abs = self%tol_abs
+    call self%minimize(problem, problem%b, x, self%gradient, rule, self%max_hessian, .false.)
+    if (self%status == qp_status_converged) then
+      write (buf, '(a,es10.3,a,es10.3,a)') 'converged: ||g^P|| = ', self%gp_norm, ' <= ', self%tol_abs, &
+        ' (tol ||b||)'
+      self%message = buf
+    end if
+    if (self%monitor) call mprgp_summary(self)
+  end subroutine mprgp_solve
+
+  !> The MPRGP iteration from a feasible x with linear term c (= b_lin).
+  !> On entry x >= l (not checked; callers project). With gradient_given,
+  !> g must hold A x - c on entry; otherwise it is computed (one Hessian
+  !> multiplication). On return x is the last iterate, g = A x - c,
+  !> gp_norm = ||g^P(x)||, status/message say why the loop stopped, and the
+  !> counters describe this call. At most max_hessian multiplications.
+  subroutine minimize(self, problem, b_lin, x, g, stop_rule, max_hessian, gradient_given)
+    class(mprgp_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(in) :: b_lin(:)
+    real(dp), intent(inout) :: x(:)
+    real(dp), intent(inout) :: g(:)
+    class(mprgp_stop_t), intent(inout) :: stop_rule
+    integer(ip), intent(in) :: max_hessian
+    logical, intent(in) :: gradient_given
+    real(dp) :: stats(4), pair(2), gp, alpha_f, alpha_cg, beta_cg, pap
+    logical :: stop
+    integer(ip) :: n
+
+    n = problem%n
+    call ensure_size(self%p, n)
+    call ensure_size(self%ap, n)
+    call ensure_size(self%w_phi, n)
+    call ensure_size(self%w_x, n)
+    call ensure_size(self%w_g, n)
+    self%n_hessian = 0
+    self%n_iterations = 0
+    self%n_cg = 0
+    self%n_expansion = 0
+    self%n_proportioning = 0
+    self%n_expansion_fallback = 0
+    self%gp_norm = huge(1.0_dp)
+    self%status = qp_status_not_run
+    self%message = ''
+
+    if (.not. gradient_given) then
+      if (max_hessian < 1) then
+        call set_status(self, qp_status_max_hessian, 'Hessian multiplication cap reached', max_hessian)
+        return
+      end if
+      call apply_hessian(self, problem, x, g)
+      g(1:n) = g(1:n) - b_lin(1:n)
+    end if
+    call free_gradient(problem, x, g, self%p)
+    call split_stats(self, problem, x, g, stats)
+
+    do
+      gp = sqrt(stats(1) + stats(2))
+      self%gp_norm = gp
+      if (.not. all(ieee_is_finite(stats))) then
+        call set_status(self, qp_status_not_finite, 'non-finite value in ||g^P||', self%n_iterations)
+        exit
+      end if
+      call stop_rule%test(problem, x, gp, stop)
+      if (stop) then
+        call set_status(self, qp_status_converged, 'converged (stopping rule met)', self%n_iterations)
+        exit
+      end if
+      if (self%n_hessian >= max_hessian) then
+        call set_status(self, qp_status_max_hessian, 'Hessian multiplication cap reached', max_hessian)
+        exit
+      end if
+
+      if (stats(2) <= self%gamma**2*stats(3)) then
+        ! proportional iterate: try a CG step along p
+        alpha_f = feasible_step(problem, x, self%p)
+        call apply_hessian(self, problem, self%p, self%ap)
+        call global_dots(problem, self%p, self%ap, g, self%p, pair)
+        pap = pair(1)
+        if (.not. (ieee_is_finite(pap) .and. ieee_is_finite(pair(2)) .and. .not. ieee_is_nan(alpha_f))) then
+          call set_status(self, qp_status_not_finite, 'non-finite value in p^T A p, g^T p or the feasible step', &
+                          self%n_iterations)
+          exit
+        end if
+        if (pap <= 0) then
+          call set_status(self, qp_status_breakdown, 'p^T A p <= 0 (Hessian not positive definite?)', &
+                          self%n_iterations)
+          exit
+        end if
+        alpha_cg = pair(2)/pap
+        if (.not. ieee_is_finite(alpha_cg)) then
+          call set_status(self, qp_status_not_finite, 'non-finite CG step length', self%n_iterations)
+          exit
+        end if
+
+        if (alpha_cg <= alpha_f) then
+          ! CG step, then p <- phi - beta_cg p with beta_cg = phi^T A p / p^T A p
+          call take_step(problem, x, g, alpha_cg, self%p, self%ap)
+          call split_stats(self, problem, x, g, stats, self%ap)
+          beta_cg = stats(4)/pap
+          if (.not. ieee_is_finite(beta_cg)) then
+            call set_status(self, qp_status_not_finite, 'non-finite CG orthogonalization coefficient', &
+                            self%n_iterations)
+            exit
+          end if
+          call conjugate(problem, x, g, beta_cg, self%p)
+          self%n_cg = self%n_cg + 1
+        else
+          ! expansion step: half step to the boundary, then the projected gradient step
+          call take_step(problem, x, g, alpha_f, self%p, self%ap)
+          self%n_expansion = self%n_expansion + 1
+          call expand(self, problem, b_lin, x, g, max_hessian)
+          if (self%status /= qp_status_not_run) exit
+          call free_gradient(problem, x, g, self%p)
+          call split_stats(self, problem, x, g, stats)
+        end if
+      else
+        ! proportioning step along beta
+        call chopped_gradient(problem, x, g, self%p)
+        call apply_hessian(self, problem, self%p, self%ap)
+        call global_dots(problem, self%p, self%ap, g, self%p, pair)
+        pap = pair(1)
+        if (.not. (ieee_is_finite(pap) .and. ieee_is_finite(pair(2)))) then
+          call set_status(self, qp_status_not_finite, 'non-finite value in beta^T A beta or g^T beta', &
+                          self%n_iterations)
+          exit
+        end if
+        if (pap <= 0) then
+          call set_status(self, qp_status_breakdown, 'beta^T A beta <= 0 (Hessian not positive definite?)', &
+                          self%n_iterations)
+          exit
+        end if
+        alpha_cg = pair(2)/pap
+        if (.not. ieee_is_finite(alpha_cg)) then
+          call set_status(self, qp_status_not_finite, 'non-finite proportioning step length', self%n_iterations)
+          exit
+        end if
+        call take_step(problem, x, g, alpha_cg, self%p, self%ap)
+        self%n_proportioning = self%n_proportioning + 1
+        call free_gradient(problem, x, g, self%p)
+        call split_stats(self, problem, x, g, stats)
+      end if
+      self%n_iterations = self%n_iterations + 1
+    end do
+  end subroutine minimize
+
+  !> Second half of an expansion step, from the half step x (at the
+  !> boundary) with gradient g: x <- P(x - alpha_e phi(x)), g recomputed.
+  !> Sets a status only when a step length is not finite. When the budget
+  !> allows no multiplication, x stays at the half step.
+  subroutine expand(self, problem, b_lin, x, g, max_hessian)
+    class(mprgp_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(in) :: b_lin(:)
+    real(dp), intent(inout) :: x(:), g(:)
+    integer(ip), intent(in) :: max_hessian
+    real(dp) :: s(3), hi(3), lo(3), alpha_e, f_half, f_new
+    integer(ip) :: n, budget
+
+    n = problem%n
+    budget = max_hessian - self%n_hessian
+    if (budget < 1) return
+    call free_gradient(problem, x, g, self%w_phi)
+
+    if (self%expansion == 'optimal' .and. budget >= 2) then
+      call apply_hessian(self, problem, self%w_phi, self%ap)
+      hi = 0
+      lo = 0
+      call add_dot(hi(1), lo(1), n, self%w_phi, g)
+      call add_dot(hi(2), lo(2), n, self%w_phi, self%ap)
+      call add_twice_cost(hi(3), lo(3), n, x, g, b_lin)
+      call problem%reduce_sums(hi, lo, s)
+      if (.not. all(ieee_is_finite(s))) then
+        call set_status(self, qp_status_not_finite, 'non-finite value in the optimal expansion step', &
+                        self%n_iterations)
+        return
+      end if
+      f_half = 0.5_dp*s(3)
+      alpha_e = self%alpha_bar
+      if (s(2) > 0) alpha_e = s(1)/s(2)
+      if (.not. ieee_is_finite(alpha_e)) then
+        call set_status(self, qp_status_not_finite, 'non-finite optimal expansion step length', &
+                        self%n_iterations)
+        return
+      end if
+      self%w_x(1:n) = x(1:n)
+      self%w_g(1:n) = g(1:n)
+      call projected_step(problem, self%w_x, alpha_e, self%w_phi, x)
+      call apply_hessian(self, problem, x, g)
+      g(1:n) = g(1:n) - b_lin(1:n)
+      hi = 0
+      lo = 0
+      call add_twice_cost(hi(1), lo(1), n, x, g, b_lin)
+      call problem%reduce_sums(hi(1:1), lo(1:1), s(1:1))
+      f_new = 0.5_dp*s(1)
+      if (.not. (f_new <= f_half)) then
+        ! the projected optimal step did not decrease the cost (or is NaN): use alpha_bar
+        self%n_expansion_fallback = self%n_expansion_fallback + 1
+        if (max_hessian - self%n_hessian >= 1) then
+          call projected_step(problem, self%w_x, self%alpha_bar, self%w_phi, x)
+          call apply_hessian(self, problem, x, g)
+          g(1:n) = g(1:n) - b_lin(1:n)
+        else
+          x(1:n) = self%w_x(1:n)
+          g(1:n) = self%w_g(1:n)
+        end if
+      end if
+    else
+      self%w_x(1:n) = x(1:n)
+      call projected_step(problem, self%w_x, self%alpha_bar, self%w_phi, x)
+      call apply_hessian(self, problem, x, g)
+      g(1:n) = g(1:n) - b_lin(1:n)
+    end if
+  end subroutine expand
+
+  !> (hi, lo) += local x^T (g - c) = 2 f(x) for g = A x - c (compensated).
+  pure subroutine add_twice_cost(hi, lo, n, x, g, c)
+    real(dp), intent(inout) :: hi, lo
+    integer(ip), intent(in) :: n
+    real(dp), intent(in) :: x(:), g(:), c(:)
+    integer(ip) :: i
+    do i = 1, n
+      call compensated_add(hi, lo, x(i)*(g(i) - c(i)))
+    end do
+  end subroutine add_twice_cost
+
+  !> (hi, lo) += local u^T v (compensated).
+  pure subroutine add_dot(hi, lo, n, u, v)
+    real(dp), intent(inout) :: hi, lo
+    integer(ip), intent(in) :: n
+    real(dp), intent(in) :: u(:), v(:)
+    integer(ip) :: i
+    do i = 1, n
+      call compensated_add(hi, lo, u(i)*v(i))
+    end do
+  end subroutine add_dot
+
+  !> res = [u1^T v1, u2^T v2], global, in one reduction.
+  subroutine global_dots(problem, u1, v1, u2, v2, res)
+    class(qp_problem_t), intent(in) :: problem
+    real(dp), intent(in) :: u1(:), v1(:), u2(:), v2(:)
+    real(dp), intent(out) :: res(2)
+    real(dp) :: hi(2), lo(2)
+    hi = 0
+    lo = 0
+    call add_dot(hi(1), lo(1), problem%n, u1, v1)
+    call add_dot(hi(2), lo(2), problem%n, u2, v2)
+    call problem%reduce_sums(hi, lo, res)
+  end subroutine global_dots
+
+  !> y = A v, counted.
+  subroutine apply_hessian(self, problem, v, y)
+    class(mprgp_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(in) :: v(:)
+    real(dp), intent(out) :: y(:)
+    call problem%hessian(v, y)
+    self%n_hessian = self%n_hessian + 1
+  end subroutine apply_hessian
+
+  !> x <- max(x - alpha d, l), g <- g - alpha A d.
+  subroutine take_step(problem, x, g, alpha, d, ad)
+    class(qp_problem_t), intent(in) :: problem
+    real(dp), intent(inout) :: x(:), g(:)
+    real(dp), intent(in) :: alpha, d(:), ad(:)
+    integer(ip) :: i
+    do i = 1, problem%n
+      x(i) = max(x(i) - alpha*d(i), problem%lower(i))
+      g(i) = g(i) - alpha*ad(i)
+    end do
+  end subroutine take_step
+
+  !> y <- max(x - alpha d, l).
+  subroutine projected_step(problem, x, alpha, d, y)
+    class(qp_problem_t), intent(in) :: problem
+    real(dp), intent(in) :: x(:), alpha, d(:)
+    real(dp), intent(inout) :: y(:)
+    integer(ip) :: i
+    do i = 1, problem%n
+      y(i) = max(x(i) - alpha*d(i), problem%lower(i))
+    end do
+  end subroutine projected_step
+
+  !> The free gradient phi(x) into v.
+  subroutine free_gradient(problem, x, g, v)
+    class(qp_problem_t), intent(in) :: problem
+    real(dp), intent(in) :: x(:), g(:)
+    real(dp), intent(inout) :: v(:)
+    integer(ip) :: i
+    do i = 1, problem%n
+      v(i) = 0
+      if (x(i) > problem%lower(i)) v(i) = g(i)
+    end do
+  end subroutine free_gradient
+
+  !> The chopped gradient beta(x) into v.
+  subroutine chopped_gradient(problem, x, g, v)
+    class(qp_problem_t), intent(in) :: problem
+    real(dp), intent(in) :: x(:), g(:)
+    real(dp), intent(inout) :: v(:)
+    integer(ip) :: i
+    do i = 1, problem%n
+      v(i) = 0
+      if (x(i) <= problem%lower(i)) v(i) = min(g(i), 0.0_dp)
+    end do
+  end subroutine chopped_gradient
+
+  !> p <- phi(x) - beta_cg p.
+  subroutine conjugate(problem, x, g, beta_cg, p)
+    class(qp_problem_t), intent(in) :: problem
+    real(dp), intent(in) :: x(:), g(:), beta_cg
+    real(dp), intent(inout) :: p(:)
+    integer(ip) :: i
+    do i = 1, problem%n
+      if (x(i) > problem%lower(i)) then
+        p(i) = g(i) - beta_cg*p(i)
+      else
+        p(i) = -beta_cg*p(i)
+      end if
+    end do
+  end subroutine conjugate
+
+  !> Global [phi^T phi, beta^T beta, phit^T phi, phi^T v] in one reduction
+  !> (the last entry 0 without v). phit uses alpha_bar; it is formed without
+  !> dividing by alpha_bar unless the result is below phi_i (no overflow).
+  subroutine split_stats(self, problem, x, g, stats, v)
+    class(mprgp_t), intent(in) :: self
+    class(qp_problem_t), intent(in) :: problem
+    real(dp), intent(in) :: x(:), g(:)
+    real(dp), intent(out) :: stats(4)
+    real(dp), intent(in), optional :: v(:)
+    real(dp) :: gi, d, abar, hi(4), lo(4)
+    integer(ip) :: i
+
+    abar = self%alpha_bar
+    hi = 0
+    lo = 0
+    do i = 1, problem%n
+      gi = g(i)
+      if (x(i) > problem%lower(i)) then
+        call compensated_add(hi(1), lo(1), gi*gi)
+        if (gi > 0 .and. problem%lower(i) > no_lower_bound) then
+          d = x(i) - problem%lower(i)
+          if (d < abar*gi) then
+            call compensated_add(hi(3), lo(3), (d/abar)*gi)
+          else
+            call compensated_add(hi(3), lo(3), gi*gi)
+          end if
+        else
+          call compensated_add(hi(3), lo(3), gi*gi)
+        end if
+      else if (gi < 0) then
+        call compensated_add(hi(2), lo(2), gi*gi)
+      end if
+    end do
+    if (present(v)) then
+      do i = 1, problem%n
+        if (x(i) > problem%lower(i)) call compensated_add(hi(4), lo(4), g(i)*v(i))
+      end do
+    end if
+    call problem%reduce_sums(hi, lo, stats)
+  end subroutine split_stats
+
+  !> The largest alpha with x - alpha p >= l (global); huge(1.0_dp) when no
+  !> bound limits the step.
+  real(dp) function feasible_step(problem, x, p)
+    class(qp_problem_t), intent(in) :: problem
+    real(dp), intent(in) :: x(:), p(:)
+    real(dp) :: a, d
+    integer(ip) :: i
+    a = huge(1.0_dp)
+    do i = 1, problem%n
+      if (p(i) > 0 .and. problem%lower(i) > no_lower_bound) then
+        d = x(i) - problem%lower(i)
+        if (d <= 0) then
+          a = 0
+        else if (p(i) >= 1) then
+          a = min(a, d/p(i))
+        else if (d < huge(1.0_dp)*p(i)) then
+          a = min(a, d/p(i))       ! p(i) < 1: the test above cannot overflow, nor can d/p(i)
+        end if
+      end if
+    end do
+    feasible_step = problem%global_min(a)
+  end function feasible_step
+
+  subroutine set_status(self, status, what, number)
+    class(mprgp_t), intent(inout) :: self
+    integer, intent(in) :: status
+    character(len=*), intent(in) :: what
+    integer(ip), intent(in) :: number
+    character(len=qp_message_len) :: buf
+    select case (status)
+    case (qp_status_converged)
+      write (buf, '(a,a,i0,a)') what, ' after ', number, ' iterations'
+    case (qp_status_max_hessian)
+      write (buf, '(3a,i0,a,es10.3)') 'not converged: ', what, ' (max_hessian = ', number, '), ||g^P|| = ', &
+        self%gp_norm
+    case default
+      write (buf, '(3a,i0)') 'not converged: ', what, ' at iteration ', number
+    end select
+    self%status = status
+    self%message = buf
+  end subroutine set_status
+
+  subroutine mprgp_summary(self)
+    class(mprgp_t), intent(in) :: self
+    character(len=300) :: buf
+    call log_message('MPRGP: '//trim(self%message))
+    write (buf, '(a,i0,a,i0,a,i0,a,i0,a,i0,a,i0,a,es10.3)') '  iterations ', self%n_iterations, ' (cg ', &
+      self%n_cg, ', expansion ', self%n_expansion, ', proportioning ', self%n_proportioning, &
+      ', expansion fallbacks ', self%n_expansion_fallback, '), Hessian multiplications ', self%n_hessian, &
+      ', ||g^P|| = ', self%gp_norm
+    call log_message(buf)
+  end subroutine mprgp_summary
+
+  !> Allocate v with length n unless it already has it (no work inside loops).
+  subroutine ensure_size(v, n)
+    real(dp), allocatable, intent(inout) :: v(:)
+    integer(ip), intent(in) :: n
+    if (allocated(v)) then
+      if (size(v) == n) return
+      deallocate (v)
+    end if
+    allocate (v(n))
+    v = 0
+  end subroutine ensure_size
+end module mprgp

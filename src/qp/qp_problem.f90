@@ -1,0 +1,340 @@
+!> The abstract quadratic programme the QP solvers work on, and the solver base type.
+!>
+!>     min 1/2 x^T A x - b^T x   s.t.  x >= l  (componentwise)  [and C x = 0]
+!>
+!> Vectors x, b, l (and every work vector of the solvers) are distributed: each
+!> rank of `comm` holds its own slice of length `n`; dot products are a local
+!> sum plus one MPI_Allreduce on `comm`. A lower bound l_i = `no_lower_bound`
+!> (= -huge(1.0_dp)) means that x_i is unbounded below; any other bound must be
+!> of moderate size (x_i - l_i is formed without overflow checks).
+!>
+!> The equality constraint C x = 0 (C with orthonormal rows) is never seen as a
+!> matrix. A problem with `has_equality` provides it in "hat" form, so that the
+!> FETI dual (C = L^{-1} G with G G^T = L L^T) never needs the factor L:
+!> - `eq_size()`: length m of the multiplier vector (replicated on every rank);
+!> - `eq_residual(x, z, cnorm)`: cnorm = ||C x|| and z (length m, replicated)
+!>   such that the multiplier update mu <- mu + rho C x reads
+!>   muhat <- muhat + rho z. Orthonormal explicit C: z = C x. FETI:
+!>   z = (G G^T)^{-1} G x and cnorm^2 = (G x)^T z;
+!> - `eq_apply_t(muhat, y)`: y = C^T mu, the local slice (FETI: y = G^T muhat).
+!> With an equality constraint the Hessian A applied by `hessian` already
+!> contains the penalty rho C^T C (FETI: A = P F P + rho Q, Q = C^T C), and
+!> `penalty()` returns that rho (> 0).
+!>
+!> Every type-bound procedure is collective over `comm` unless stated otherwise.
+!>
+!> Global sums (dot products, norms, the solvers' fused reductions) are
+!> compensated: each rank sums its terms with Neumaier's algorithm
+!> (`compensated_add`) and the (sum, error) pairs are combined across ranks
+!> by a double-double MPI reduction (`reduce_sums`). The result is the
+!> correctly rounded sum of the (rounded) terms except in rare near-tie
+!> cases, so it does not depend on how a vector is split over the ranks:
+!> given a Hessian whose result does not depend on it either, the solvers
+!> take the same steps on any number of ranks. The solvers fuse their dot
+!> products through `reduce_sums` instead of calling `dot`: the inner
+!> product is always the Euclidean one of the distributed vector.
+module qp_problem
+  use, intrinsic :: iso_c_binding, only: c_ptr, c_f_pointer
+  use kinds, only: dp, ip, MPI_REAL_DP, MPI_INT_IP
+  use errors, only: fatal_error
+  use mpi_f08, only: MPI_Comm, MPI_COMM_NULL, MPI_Allreduce, MPI_SUM, MPI_MIN, MPI_Datatype, MPI_Op, &
+                     MPI_Type_contiguous, MPI_Type_commit, MPI_Op_create
+  implicit none
+  private
+
+  public :: qp_status_name, compensated_add
+
+  real(dp), parameter, public :: no_lower_bound = -huge(1.0_dp)  !< l_i of an unbounded x_i
+
+  integer, parameter, public :: qp_message_len = 256
+  integer, parameter, public :: max_reduce_sums = 8   !< most sums reduce_sums combines at once
+
+  ! the double-double reduction, created on first use (MPI_Finalize frees it)
+  logical, save :: dd_ready = .false.
+  type(MPI_Datatype), save :: dd_type
+  type(MPI_Op), save :: dd_op
+
+  !> Solver status codes (component `status` of every qp_solver_t).
+  integer, parameter, public :: qp_status_not_run = -1      !< solve not called yet
+  integer, parameter, public :: qp_status_converged = 0     !< stopping criterion met
+  integer, parameter, public :: qp_status_max_hessian = 1   !< Hessian multiplication cap reached
+  integer, parameter, public :: qp_status_max_outer = 2     !< outer iteration cap reached
+  integer, parameter, public :: qp_status_not_finite = 3    !< NaN or Inf detected in a norm or step length
+  integer, parameter, public :: qp_status_breakdown = 4     !< p^T A p <= 0 (A not positive definite)
+  integer, parameter, public :: qp_status_incompatible = 5  !< the solver refused the problem
+
+  !> A distributed QP with lower bounds and optionally C x = 0 (see the module).
+  !> Extensions must override `hessian`; problems with an equality constraint
+  !> also override `penalty`, `eq_size`, `eq_residual` and `eq_apply_t`.
+  type, abstract, public :: qp_problem_t
+    type(MPI_Comm) :: comm = MPI_COMM_NULL     !< communicator of the distributed vectors
+    integer(ip) :: n = 0                       !< local length of x, b, lower on this rank
+    real(dp), allocatable :: b(:)              !< linear term (local slice)
+    real(dp), allocatable :: lower(:)          !< lower bounds l (local slice), no_lower_bound if none
+    logical :: has_equality = .false.          !< the constraint C x = 0 is present
+  contains
+    procedure(hessian_iface), deferred :: hessian
+    procedure :: penalty => default_penalty
+    procedure :: eq_size => default_eq_size
+    procedure :: eq_residual => default_eq_residual
+    procedure :: eq_apply_t => default_eq_apply_t
+    procedure :: init_base
+    procedure :: free_base
+    procedure :: dot
+    procedure :: norm
+    procedure :: reduce_sums
+    procedure :: global_min
+    procedure :: count_at_bound
+    procedure :: project
+  end type qp_problem_t
+
+  abstract interface
+    !> y = A x (local slices; collective).
+    subroutine hessian_iface(self, x, y)
+      import :: qp_problem_t, dp
+      class(qp_problem_t), intent(inout) :: self
+      real(dp), intent(in) :: x(:)
+      real(dp), intent(out) :: y(:)
+    end subroutine hessian_iface
+  end interface
+
+  !> What every QP solver has: a status with a message, the final norm of the
+  !> projected gradient, the Hessian multiplications and the final gradient.
+  type, abstract, public :: qp_solver_t
+    integer :: status = qp_status_not_run            !< one of qp_status_*
+    character(len=qp_message_len) :: message = 'not run'  !< why the solver stopped
+    logical :: monitor = .false.                     !< print progress through module logger
+    real(dp) :: gp_norm = 0                          !< ||g^P|| at the returned x
+    integer(ip) :: n_hessian = 0                     !< Hessian multiplications of the last solve
+    real(dp), allocatable :: gradient(:)             !< gradient (of the Lagrangian) at the returned x
+  contains
+    procedure(solve_iface), deferred :: solve
+    procedure(compatible_iface), deferred :: is_compatible
+    procedure :: converged => solver_converged
+  end type qp_solver_t
+
+  abstract interface
+    !> Solve `problem` from the initial guess `x` (projected onto the bounds
+    !> first); on return `x` is the last iterate and `status`/`message` say
+    !> whether it meets the stopping criterion. Collective.
+    subroutine solve_iface(self, problem, x)
+      import :: qp_solver_t, qp_problem_t, dp
+      class(qp_solver_t), intent(inout) :: self
+      class(qp_problem_t), intent(inout) :: problem
+      real(dp), intent(inout) :: x(:)
+    end subroutine solve_iface
+
+    !> True when the solver can handle `problem`; otherwise `reason` says why.
+    logical function compatible_iface(self, problem, reason)
+      import :: qp_solver_t, qp_problem_t
+      class(qp_solver_t), intent(in) :: self
+      class(qp_problem_t), intent(inout) :: problem
+      character(len=*), intent(out) :: reason
+    end function compatible_iface
+  end interface
+
+contains
+
+  !> Set the communicator and the local length; allocate b = 0 and
+  !> lower = no_lower_bound; no equality. Extensions call this in their init.
+  subroutine init_base(self, comm, n)
+    class(qp_problem_t), intent(inout) :: self
+    type(MPI_Comm), intent(in) :: comm
+    integer(ip), intent(in) :: n
+    call self%free_base()
+    if (n < 0) call fatal_error('qp_problem: negative local length')
+    self%comm = comm
+    self%n = n
+    allocate (self%b(n), self%lower(n))
+    self%b = 0
+    self%lower = no_lower_bound
+  end subroutine init_base
+
+  !> Release what init_base allocated.
+  subroutine free_base(self)
+    class(qp_problem_t), intent(inout) :: self
+    if (allocated(self%b)) deallocate (self%b)
+    if (allocated(self%lower)) deallocate (self%lower)
+    self%n = 0
+    self%has_equality = .false.
+    self%comm = MPI_COMM_NULL
+  end subroutine free_base
+
+  !> Penalty rho contained in the Hessian: 0 without equality constraint; a
+  !> problem with one must override this.
+  real(dp) function default_penalty(self)
+    class(qp_problem_t), intent(in) :: self
+    default_penalty = 0
+    if (self%has_equality) call fatal_error('qp_problem: has_equality but penalty() not provided')
+  end function default_penalty
+
+  !> Length of the multiplier vector: 0 without equality constraint; a
+  !> problem with one must override this.
+  integer(ip) function default_eq_size(self)
+    class(qp_problem_t), intent(in) :: self
+    default_eq_size = 0
+    if (self%has_equality) call fatal_error('qp_problem: has_equality but eq_size() not provided')
+  end function default_eq_size
+
+  subroutine default_eq_residual(self, x, z, cnorm)
+    class(qp_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(out) :: z(:)
+    real(dp), intent(out) :: cnorm
+    character(len=80) :: sizes
+    write (sizes, '(3(a,i0))') 'n = ', self%n, ', size(x) = ', size(x), ', size(z) = ', size(z)
+    call fatal_error('qp_problem: eq_residual not provided by this problem ('//trim(sizes)//')')
+    z = 0
+    cnorm = 0
+  end subroutine default_eq_residual
+
+  subroutine default_eq_apply_t(self, muhat, y)
+    class(qp_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: muhat(:)
+    real(dp), intent(out) :: y(:)
+    character(len=80) :: sizes
+    write (sizes, '(2(a,i0))') 'n = ', self%n, ', size(muhat) = ', size(muhat)
+    call fatal_error('qp_problem: eq_apply_t not provided by this problem ('//trim(sizes)//')')
+    y = 0
+  end subroutine default_eq_apply_t
+
+  !> Global x^T y (compensated, independent of the distribution).
+  real(dp) function dot(self, x, y)
+    class(qp_problem_t), intent(in) :: self
+    real(dp), intent(in) :: x(:), y(:)
+    real(dp) :: hi(1), lo(1), s(1)
+    integer(ip) :: i
+    hi = 0
+    lo = 0
+    do i = 1, self%n
+      call compensated_add(hi(1), lo(1), x(i)*y(i))
+    end do
+    call self%reduce_sums(hi, lo, s)
+    dot = s(1)
+  end function dot
+
+  !> Global ||x||_2.
+  real(dp) function norm(self, x)
+    class(qp_problem_t), intent(in) :: self
+    real(dp), intent(in) :: x(:)
+    norm = sqrt(self%dot(x, x))
+  end function norm
+
+  !> One step of Neumaier's compensated summation: s + c <- s + c + p
+  !> (s the running sum, c the accumulated rounding errors; start both at 0).
+  elemental subroutine compensated_add(s, c, p)
+    real(dp), intent(inout) :: s, c
+    real(dp), intent(in) :: p
+    real(dp) :: t
+    t = s + p
+    if (abs(s) >= abs(p)) then
+      c = c + ((s - t) + p)
+    else
+      c = c + ((p - t) + s)
+    end if
+    s = t
+  end subroutine compensated_add
+
+  !> total(k) = global sum of the local compensated sums hi(k) + lo(k), in
+  !> one MPI_Allreduce with a double-double reduction (at most
+  !> max_reduce_sums entries).
+  subroutine reduce_sums(self, hi, lo, total)
+    class(qp_problem_t), intent(in) :: self
+    real(dp), intent(in) :: hi(:), lo(:)
+    real(dp), intent(out) :: total(:)
+    real(dp) :: send(2, max_reduce_sums), recv(2, max_reduce_sums)
+    integer :: k, ierr
+    k = size(hi)
+    if (k > max_reduce_sums .or. size(lo) /= k .or. size(total) /= k) &
+      call fatal_error('qp_problem: reduce_sums: bad sizes')
+    if (.not. dd_ready) call create_dd_reduction()
+    send(1, 1:k) = hi
+    send(2, 1:k) = lo
+    call MPI_Allreduce(send, recv, k, dd_type, dd_op, self%comm, ierr)
+    total = recv(1, 1:k) + recv(2, 1:k)
+  end subroutine reduce_sums
+
+  !> The MPI datatype (two doubles) and operation of the double-double sum.
+  subroutine create_dd_reduction()
+    integer :: ierr
+    call MPI_Type_contiguous(2, MPI_REAL_DP, dd_type, ierr)
+    call MPI_Type_commit(dd_type, ierr)
+    call MPI_Op_create(dd_sum, .true., dd_op, ierr)
+    dd_ready = .true.
+  end subroutine create_dd_reduction
+
+  !> inout <- in + inout for `len` double-double pairs (hi, lo): the hi parts
+  !> are added with their exact rounding error (TwoSum) carried in lo.
+  subroutine dd_sum(invec, inoutvec, len, datatype)
+    type(c_ptr), value :: invec, inoutvec
+    integer :: len
+    type(MPI_Datatype) :: datatype   ! always dd_type
+    real(dp), pointer :: a(:, :), b(:, :)
+    real(dp) :: t, v, e
+    integer :: k
+    call c_f_pointer(invec, a, [2, len])
+    call c_f_pointer(inoutvec, b, [2, len])
+    do k = 1, len
+      t = a(1, k) + b(1, k)
+      v = t - a(1, k)
+      e = (a(1, k) - (t - v)) + (b(1, k) - v)
+      b(2, k) = (a(2, k) + b(2, k)) + e
+      b(1, k) = t
+    end do
+  end subroutine dd_sum
+
+  !> Minimum of `a` over the ranks of comm.
+  real(dp) function global_min(self, a)
+    class(qp_problem_t), intent(in) :: self
+    real(dp), intent(in) :: a
+    integer :: ierr
+    call MPI_Allreduce(a, global_min, 1, MPI_REAL_DP, MPI_MIN, self%comm, ierr)
+  end function global_min
+
+  !> Global number of components with x_i <= l_i (x_i at its bound).
+  integer(ip) function count_at_bound(self, x)
+    class(qp_problem_t), intent(in) :: self
+    real(dp), intent(in) :: x(:)
+    integer(ip) :: local
+    integer :: ierr
+    local = int(count(x(1:self%n) <= self%lower(1:self%n) .and. self%lower(1:self%n) > no_lower_bound), ip)
+    call MPI_Allreduce(local, count_at_bound, 1, MPI_INT_IP, MPI_SUM, self%comm, ierr)
+  end function count_at_bound
+
+  !> x <- max(x, l), the projection onto the bounds (local, no communication).
+  subroutine project(self, x)
+    class(qp_problem_t), intent(in) :: self
+    real(dp), intent(inout) :: x(:)
+    x(1:self%n) = max(x(1:self%n), self%lower(1:self%n))
+  end subroutine project
+
+  !> True when the last solve met its stopping criterion.
+  logical function solver_converged(self)
+    class(qp_solver_t), intent(in) :: self
+    solver_converged = self%status == qp_status_converged
+  end function solver_converged
+
+  !> A short name of a status code, for reports.
+  function qp_status_name(status) result(name)
+    integer, intent(in) :: status
+    character(len=:), allocatable :: name
+    select case (status)
+    case (qp_status_not_run)
+      name = 'not run'
+    case (qp_status_converged)
+      name = 'converged'
+    case (qp_status_max_hessian)
+      name = 'max_hessian reached'
+    case (qp_status_max_outer)
+      name = 'max_outer reached'
+    case (qp_status_not_finite)
+      name = 'non-finite value'
+    case (qp_status_breakdown)
+      name = 'breakdown'
+    case (qp_status_incompatible)
+      name = 'problem refused'
+    case default
+      name = 'unknown status'
+    end select
+  end function qp_status_name
+end module qp_problem
