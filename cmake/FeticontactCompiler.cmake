@@ -9,7 +9,14 @@ if(NOT CMAKE_Fortran_COMPILER_ID STREQUAL "GNU")
 endif()
 
 set(CMAKE_Fortran_FLAGS "${CMAKE_Fortran_FLAGS} -std=f2018 -ffree-line-length-132 -fimplicit-none")
-set(CMAKE_Fortran_FLAGS_RELEASE "-O3 -march=native -funroll-loops")
-set(CMAKE_Fortran_FLAGS_RELWITHDEBINFO "-O2 -g -march=native")
+# -march=native unless FETICONTACT_NATIVE=OFF (valgrind cannot run AVX-512 code:
+# profile with -DFETICONTACT_NATIVE=OFF -DCMAKE_BUILD_TYPE=RelWithDebInfo).
+option(FETICONTACT_NATIVE "Optimize for the build machine's CPU (-march=native)" ON)
+set(_native "")
+if(FETICONTACT_NATIVE)
+  set(_native "-march=native")
+endif()
+set(CMAKE_Fortran_FLAGS_RELEASE "-O3 ${_native} -funroll-loops")
+set(CMAKE_Fortran_FLAGS_RELWITHDEBINFO "-O3 -g ${_native} -funroll-loops")
 set(CMAKE_Fortran_FLAGS_DEBUG
     "-O0 -g -fcheck=all -ffpe-trap=invalid,zero,overflow -fbacktrace -finit-real=snan -finit-integer=-2147483647 -Wall -Wextra -Wno-compare-reals -Wno-maybe-uninitialized")

@@ -6,7 +6,7 @@ set -euo pipefail
 
 FETICONTACT_PACKAGES=(gfortran gcc cmake ninja-build make pkg-config
   libopenmpi-dev openmpi-bin libmumps-dev libmetis-dev libhdf5-openmpi-dev
-  liblapack-dev libblas-dev python3-numpy python3-matplotlib python3-h5py)
+  liblapack-dev libblas-dev libopenblas0-serial python3-numpy python3-matplotlib python3-h5py)
 
 install_missing_packages() {
   local missing=()

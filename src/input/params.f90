@@ -67,6 +67,7 @@ module params
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| power method
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
+    character(len=name_len) :: local_solver = 'block'    !< 'block' | 'subdomain'
     real(dp) :: regularization = 1            !< rho_f relative to the mean diagonal of K
     logical :: monitor = .true.               !< one line per outer iteration
   end type solver_params_t
@@ -431,7 +432,7 @@ contains
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, &
                 regularization, active_tol, kkt_tol
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
-                               local_ordering, method
+                               local_ordering, local_solver, method
     character(len=path_len) :: directory
     logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report
     namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping
@@ -440,7 +441,7 @@ contains
     namelist /boundary/ top_dirichlet, top_displacement, symmetry_x0, symmetry_y0
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
-      m_scale, beta, eta_scale, power_iterations, coarse, local_ordering, regularization, monitor
+      m_scale, beta, eta_scale, power_iterations, coarse, local_ordering, local_solver, regularization, monitor
     namelist /reconstruction/ method, active_tol, kkt_tol
     character(len=name_len) :: run_name
     namelist /output/ directory, run_name, write_hdf5, write_report
@@ -479,12 +480,13 @@ contains
         alpha_scale = s%alpha_scale; expansion = s%expansion; rho_scale = s%rho_scale
         m_scale = s%m_scale; beta = s%beta; eta_scale = s%eta_scale
         power_iterations = s%power_iterations; coarse = s%coarse
-        local_ordering = s%local_ordering; regularization = s%regularization; monitor = s%monitor
+        local_ordering = s%local_ordering; local_solver = s%local_solver
+        regularization = s%regularization; monitor = s%monitor
       end associate
       read (group_text, nml=solver, iostat=status, iomsg=msg)
       p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
                                  rho_scale, m_scale, beta, eta_scale, power_iterations, lower(coarse), &
-                                 lower(local_ordering), regularization, monitor)
+                                 lower(local_ordering), lower(local_solver), regularization, monitor)
     case ('reconstruction')
       method = p%reconstruction%method; active_tol = p%reconstruction%active_tol
       kkt_tol = p%reconstruction%kkt_tol
@@ -558,6 +560,8 @@ contains
         call fail('solver', 'coarse', "must be 'mumps' or 'cholesky'", s%coarse)
       if (.not. one_of(s%local_ordering, [character(len=8) :: 'amd', 'metis'])) &
         call fail('solver', 'local_ordering', "must be 'amd' or 'metis'", s%local_ordering)
+      if (.not. one_of(s%local_solver, [character(len=10) :: 'block', 'subdomain'])) &
+        call fail('solver', 'local_solver', "must be 'block' or 'subdomain'", s%local_solver)
       if (s%regularization <= 0) &
         call fail('solver', 'regularization', 'must be > 0', reals([s%regularization]))
     end associate
@@ -611,7 +615,8 @@ contains
         "', rho_scale = "//reals([s%rho_scale])//', m_scale = '//reals([s%m_scale])// &
         ', beta = '//reals([s%beta])//', eta_scale = '//reals([s%eta_scale])// &
         ', power_iterations = '//ints([s%power_iterations])//", coarse = '"//trim(s%coarse)// &
-        "', local_ordering = '"//trim(s%local_ordering)//"', regularization = "// &
+        "', local_ordering = '"//trim(s%local_ordering)//"', local_solver = '"//trim(s%local_solver)// &
+        "', regularization = "// &
         reals([s%regularization])//', monitor = '//logs(s%monitor)//' /'
     end associate
     write (unit, '(a)') "&reconstruction method = '"//trim(p%reconstruction%method)// &
@@ -647,6 +652,7 @@ contains
       ', "beta": '//jreals([p%solver%beta])//', "eta_scale": '//jreals([p%solver%eta_scale])// &
       ', "power_iterations": '//jints([p%solver%power_iterations])//', "coarse": "'// &
       trim(p%solver%coarse)//'", "local_ordering": "'//trim(p%solver%local_ordering)// &
+      '", "local_solver": "'//trim(p%solver%local_solver)// &
       '", "regularization": '//jreals([p%solver%regularization])//', "monitor": '// &
       jlog(p%solver%monitor)//'}, '// &
       '"reconstruction": {"method": "'//trim(p%reconstruction%method)//'", "active_tol": '// &

@@ -56,6 +56,8 @@ module kplus
 
   !> K^+ of one subdomain. Components are for reading (diagnostics, tests).
   !> Do not copy a kplus_t by assignment (it holds a MUMPS instance).
+  public :: regularized_system
+
   type, public :: kplus_t
     integer(ip) :: ndof = 0                       !< order of K
     real(dp) :: rho = 0                           !< rho_f, stiffness of the fixing springs
@@ -141,6 +143,30 @@ contains
     this%rho = 0
     this%gram_ratio = 0
   end subroutine free
+
+  !> The upper triangle of K_reg = K + rho_f R_F R_F^T of `sub` in
+  !> coordinate form, with rho_f = regularization * mean diag(K) and the
+  !> fixing nodes chosen as in `init`, and (ordering 'metis') the METIS pivot
+  !> order perm(dof) = position; perm is not allocated for 'amd'. Used by
+  !> kplus_block to factorize many subdomains as one block-diagonal matrix.
+  subroutine regularized_system(sub, regularization, ordering, irn, jcn, a, perm)
+    type(subdomain_t), intent(in) :: sub
+    real(dp), intent(in) :: regularization
+    character(len=*), intent(in) :: ordering
+    integer(ip), allocatable, intent(out) :: irn(:), jcn(:), perm(:)
+    real(dp), allocatable, intent(out) :: a(:)
+    integer(ip), allocatable :: nodes(:), fixing_dofs(:)
+    real(dp), allocatable :: block(:, :)
+    real(dp) :: ratio, rho
+    call check_subdomain(sub)
+    if (.not. (regularization > 0)) call fatal_error('kplus: the regularization must be > 0')
+    rho = regularization*mean_diagonal(sub)
+    if (.not. (rho > 0)) call fatal_error('kplus: K has no positive diagonal')
+    call choose_fixing_nodes(sub, nodes, ratio)
+    call fixing_block(sub, nodes, rho, fixing_dofs, block)
+    call upper_coo(sub, fixing_dofs, block, irn, jcn, a)
+    if (ordering == 'metis') call node_nested_dissection(sub, nodes, perm)
+  end subroutine regularized_system
 
   ! ---------------------------------------------------------------- private
 
