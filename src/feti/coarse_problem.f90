@@ -15,6 +15,13 @@
 !> ranks give for the same (s, t) (distributed assembled input).
 !> An optional row mask restricts the sum to some rows: the standard
 !> reconstruction's G_A G_A^T uses the same code.
+!>
+!> Placement (&solver coarse_placement): 'distributed' factorizes with MUMPS
+!> on all ranks of the communicator (distributed input, centralized RHS on
+!> rank 0, solution scattered back); 'redundant' gathers the matrix on every
+!> rank and factorizes it there on MPI_COMM_SELF, so that a solve is one
+!> MPI_Allgatherv of the right-hand side and a local MUMPS solve, with no
+!> message inside MUMPS.
 module coarse_problem
   use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_IP
   use errors, only: fatal_error
@@ -22,7 +29,8 @@ module coarse_problem
   use constraints, only: constraints_t
   use mumps_wrapper, only: mumps_t
   use block_hash, only: block_hash_t
-  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gatherv, MPI_Scatterv, MPI_Wtime
+  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gatherv, MPI_Scatterv, MPI_Wtime, &
+                     MPI_Allgather, MPI_Allgatherv, MPI_INTEGER, MPI_COMM_SELF
   implicit none
   private
 
@@ -44,6 +52,8 @@ module coarse_problem
     type(mumps_t) :: mumps
     real(dp), allocatable :: rhs(:, :)      !< (n, 1) on rank 0
     logical :: factorized = .false.
+    logical :: redundant = .false.          !< every rank holds the whole factorization
+    integer :: rank = 0
     real(dp) :: seconds_factorization = 0   !< MUMPS analysis + factorization in init
   contains
     procedure :: init
@@ -91,13 +101,14 @@ contains
 
   !> Assemble G G^T (or G_A G_A^T with `mask`) and factorize it. `con%b(:)%g`
   !> must hold the entries of G^T. Collective.
-  subroutine init(this, dec, con, layout, comm, mask)
+  subroutine init(this, dec, con, layout, comm, mask, placement)
     class(coarse_problem_t), intent(inout) :: this
     type(decomposition_t), intent(in) :: dec
     type(constraints_t), intent(inout) :: con
     type(coarse_layout_t), intent(in) :: layout
     type(MPI_Comm), intent(in) :: comm
     logical, intent(in), optional :: mask(:)
+    character(len=*), intent(in), optional :: placement
     real(dp), allocatable :: slots_local(:, :), slots_own(:, :)
     integer(ip) :: copies(8), ncopies
     integer(ip), allocatable :: irn(:), jcn(:)
@@ -155,20 +166,54 @@ contains
     ! 3. COO of the upper triangle, to MUMPS
     call blocks%to_coo(irn, jcn, a)
     this%nnz_local = size(a, kind=i8)
-    call this%mumps%init(comm, .true.)
-    call this%mumps%set_distributed(this%n, irn, jcn, a)
+    this%rank = rank
+    this%redundant = .false.
+    if (present(placement)) this%redundant = placement == 'redundant'
+    if (this%redundant) then
+      call gather_everywhere(irn, jcn, a)
+      call this%mumps%init(MPI_COMM_SELF, .true.)
+      call this%mumps%set_centralized(this%n, irn, jcn, a)
+    else
+      call this%mumps%init(comm, .true.)
+      call this%mumps%set_distributed(this%n, irn, jcn, a)
+    end if
     call this%mumps%set_ordering('auto')
     t0 = MPI_Wtime()
     call this%mumps%factorize()
     this%seconds_factorization = MPI_Wtime() - t0
     this%factorized = .true.
-    if (rank == 0) then
+    if (rank == 0 .or. this%redundant) then
       allocate (this%rhs(this%n, 1))
     else
       allocate (this%rhs(1, 1))
     end if
 
   contains
+
+    !> Every rank gets all ranks' COO entries.
+    subroutine gather_everywhere(irn, jcn, a)
+      integer(ip), allocatable, intent(inout) :: irn(:), jcn(:)
+      real(dp), allocatable, intent(inout) :: a(:)
+      integer, allocatable :: counts(:), displs(:)
+      integer(ip), allocatable :: all_i(:), all_j(:)
+      real(dp), allocatable :: all_a(:)
+      integer :: nranks, r, mine
+      call MPI_Comm_size(comm, nranks, ierr)
+      allocate (counts(nranks), displs(nranks))
+      mine = size(a)
+      call MPI_Allgather(mine, 1, MPI_INTEGER, counts, 1, MPI_INTEGER, comm, ierr)
+      displs(1) = 0
+      do r = 2, nranks
+        displs(r) = displs(r - 1) + counts(r - 1)
+      end do
+      allocate (all_i(sum(counts)), all_j(sum(counts)), all_a(sum(counts)))
+      call MPI_Allgatherv(irn, mine, MPI_INT_IP, all_i, counts, displs, MPI_INT_IP, comm, ierr)
+      call MPI_Allgatherv(jcn, mine, MPI_INT_IP, all_j, counts, displs, MPI_INT_IP, comm, ierr)
+      call MPI_Allgatherv(a, mine, MPI_REAL_DP, all_a, counts, displs, MPI_REAL_DP, comm, ierr)
+      call move_alloc(all_i, irn)
+      call move_alloc(all_j, jcn)
+      call move_alloc(all_a, a)
+    end subroutine gather_everywhere
 
     !> block(ps, pt) += u v^T, kept as an upper-triangular block pair
     subroutine add_product(ps, pt, u, v)
@@ -195,13 +240,20 @@ contains
     class(coarse_problem_t), intent(inout) :: this
     real(dp), intent(in) :: b(:)
     real(dp), intent(out) :: x(:)
-    integer :: ierr, rank
-    call MPI_Comm_rank(this%comm, rank, ierr)
-    call MPI_Gatherv(b, 6*this%layout%nlocal, MPI_REAL_DP, this%rhs, this%layout%counts, this%layout%displs, &
-                     MPI_REAL_DP, 0, this%comm, ierr)
-    call this%mumps%solve(this%rhs)
-    call MPI_Scatterv(this%rhs, this%layout%counts, this%layout%displs, MPI_REAL_DP, x, &
-                      6*this%layout%nlocal, MPI_REAL_DP, 0, this%comm, ierr)
+    integer :: ierr, first
+    if (this%redundant) then
+      call MPI_Allgatherv(b, 6*this%layout%nlocal, MPI_REAL_DP, this%rhs, this%layout%counts, &
+                          this%layout%displs, MPI_REAL_DP, this%comm, ierr)
+      call this%mumps%solve(this%rhs)
+      first = this%layout%displs(this%rank + 1)
+      x(1:6*this%layout%nlocal) = this%rhs(first + 1:first + 6*this%layout%nlocal, 1)
+    else
+      call MPI_Gatherv(b, 6*this%layout%nlocal, MPI_REAL_DP, this%rhs, this%layout%counts, &
+                       this%layout%displs, MPI_REAL_DP, 0, this%comm, ierr)
+      call this%mumps%solve(this%rhs)
+      call MPI_Scatterv(this%rhs, this%layout%counts, this%layout%displs, MPI_REAL_DP, x, &
+                        6*this%layout%nlocal, MPI_REAL_DP, 0, this%comm, ierr)
+    end if
   end subroutine solve
 
   subroutine free(this)

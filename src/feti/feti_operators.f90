@@ -137,7 +137,7 @@ contains
 
     call timer_start('coarse setup')
     call build_coarse_layout(this%dec, comm, this%layout)
-    call this%coarse%init(this%dec, this%con, this%layout, comm)
+    call this%coarse%init(this%dec, this%con, this%layout, comm, placement=p%solver%coarse_placement)
     call timer_stop('coarse setup')
 
     call timer_start('dual setup')

@@ -68,6 +68,7 @@ module params
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
     character(len=name_len) :: local_solver = 'block'    !< 'block' | 'subdomain'
+    character(len=name_len) :: coarse_placement = 'redundant'  !< 'redundant' | 'distributed'
     real(dp) :: regularization = 1            !< rho_f relative to the mean diagonal of K
     logical :: monitor = .true.               !< one line per outer iteration
   end type solver_params_t
@@ -432,7 +433,7 @@ contains
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, &
                 regularization, active_tol, kkt_tol
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
-                               local_ordering, local_solver, method
+                               local_ordering, local_solver, coarse_placement, method
     character(len=path_len) :: directory
     logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report
     namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping
@@ -441,7 +442,8 @@ contains
     namelist /boundary/ top_dirichlet, top_displacement, symmetry_x0, symmetry_y0
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
-      m_scale, beta, eta_scale, power_iterations, coarse, local_ordering, local_solver, regularization, monitor
+      m_scale, beta, eta_scale, power_iterations, coarse, coarse_placement, local_ordering, local_solver, &
+      regularization, monitor
     namelist /reconstruction/ method, active_tol, kkt_tol
     character(len=name_len) :: run_name
     namelist /output/ directory, run_name, write_hdf5, write_report
@@ -481,12 +483,14 @@ contains
         m_scale = s%m_scale; beta = s%beta; eta_scale = s%eta_scale
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
+        coarse_placement = s%coarse_placement
         regularization = s%regularization; monitor = s%monitor
       end associate
       read (group_text, nml=solver, iostat=status, iomsg=msg)
       p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
                                  rho_scale, m_scale, beta, eta_scale, power_iterations, lower(coarse), &
-                                 lower(local_ordering), lower(local_solver), regularization, monitor)
+                                 lower(local_ordering), lower(local_solver), lower(coarse_placement), &
+                                 regularization, monitor)
     case ('reconstruction')
       method = p%reconstruction%method; active_tol = p%reconstruction%active_tol
       kkt_tol = p%reconstruction%kkt_tol
@@ -560,6 +564,8 @@ contains
         call fail('solver', 'coarse', "must be 'mumps' or 'cholesky'", s%coarse)
       if (.not. one_of(s%local_ordering, [character(len=8) :: 'amd', 'metis'])) &
         call fail('solver', 'local_ordering', "must be 'amd' or 'metis'", s%local_ordering)
+      if (.not. one_of(s%coarse_placement, [character(len=12) :: 'redundant', 'distributed'])) &
+        call fail('solver', 'coarse_placement', "must be 'redundant' or 'distributed'", s%coarse_placement)
       if (.not. one_of(s%local_solver, [character(len=10) :: 'block', 'subdomain'])) &
         call fail('solver', 'local_solver', "must be 'block' or 'subdomain'", s%local_solver)
       if (s%regularization <= 0) &
@@ -615,6 +621,7 @@ contains
         "', rho_scale = "//reals([s%rho_scale])//', m_scale = '//reals([s%m_scale])// &
         ', beta = '//reals([s%beta])//', eta_scale = '//reals([s%eta_scale])// &
         ', power_iterations = '//ints([s%power_iterations])//", coarse = '"//trim(s%coarse)// &
+        "', coarse_placement = '"//trim(s%coarse_placement)// &
         "', local_ordering = '"//trim(s%local_ordering)//"', local_solver = '"//trim(s%local_solver)// &
         "', regularization = "// &
         reals([s%regularization])//', monitor = '//logs(s%monitor)//' /'
@@ -653,6 +660,7 @@ contains
       ', "power_iterations": '//jints([p%solver%power_iterations])//', "coarse": "'// &
       trim(p%solver%coarse)//'", "local_ordering": "'//trim(p%solver%local_ordering)// &
       '", "local_solver": "'//trim(p%solver%local_solver)// &
+      '", "coarse_placement": "'//trim(p%solver%coarse_placement)// &
       '", "regularization": '//jreals([p%solver%regularization])//', "monitor": '// &
       jlog(p%solver%monitor)//'}, '// &
       '"reconstruction": {"method": "'//trim(p%reconstruction%method)//'", "active_tol": '// &
