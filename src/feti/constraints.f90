@@ -28,6 +28,7 @@ module constraints
   use decomposition, only: decomposition_t
   use subdomain, only: subdomain_t
   use key_sort, only: sort_permutation
+  use sorting, only: sort_unique
   use dual_exchange, only: dual_exchange_t
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Allreduce, MPI_Exscan, MPI_SUM
   implicit none
@@ -322,9 +323,11 @@ contains
     integer(ip), intent(in) :: me
     integer(ip) :: copies(8), ncopies
     integer(ip), allocatable :: dest_rank(:), dest_row(:), perm(:), send_index(:), recv_index(:)
-    integer, allocatable :: nbrs(:), send_counts(:), recv_counts(:), ranks_here(:)
+    integer(ip), allocatable :: nbrs(:)
+    integer, allocatable :: send_counts(:), recv_counts(:), ranks_here(:)
     integer(ip) :: i, k, n, index, q
-    integer :: nr, t
+    integer(ip) :: nr
+    integer :: t
 
     ! (destination rank, owned row) pairs, in row (= key) order
     allocate (dest_rank(16*con%n_own + 1), dest_row(16*con%n_own + 1))
@@ -350,15 +353,8 @@ contains
     send_index = dest_row(perm)
 
     ! neighbours: union of destination ranks and ghost owners
-    nbrs = [integer ::]
-    do i = 1, n
-      if (.not. any(nbrs == dest_rank(i))) nbrs = [nbrs, int(dest_rank(i))]
-    end do
-    do i = 1, size(ghost_owner)
-      if (.not. any(nbrs == ghost_owner(i))) nbrs = [nbrs, int(ghost_owner(i))]
-    end do
-    call sort_ints(nbrs)
-    nr = size(nbrs)
+    nbrs = [dest_rank(1:n), ghost_owner]
+    call sort_unique(nbrs, nr)
     allocate (send_counts(nr), recv_counts(nr))
     do t = 1, nr
       q = nbrs(t)
@@ -368,22 +364,8 @@ contains
     recv_index = [(con%n_own + i, i = 1, size(ghost_owner, kind=ip))]
     ! ghosts are grouped by owner in ascending owner order, as nbrs is
     if (sum(recv_counts) /= size(ghost_owner)) call fatal_error('constraints: ghost rows without a neighbour')
-    call con%exchange%init(con%comm, con%n_own, con%n_local, nbrs, send_counts, send_index, &
+    call con%exchange%init(con%comm, con%n_own, con%n_local, int(nbrs(1:nr)), send_counts, send_index, &
                            recv_counts, recv_index)
   end subroutine build_exchange
 
-  subroutine sort_ints(v)
-    integer, intent(inout) :: v(:)
-    integer :: i, j, t
-    do i = 2, size(v)
-      t = v(i)
-      j = i - 1
-      do while (j >= 1)
-        if (v(j) <= t) exit
-        v(j + 1) = v(j)
-        j = j - 1
-      end do
-      v(j + 1) = t
-    end do
-  end subroutine sort_ints
 end module constraints

@@ -68,6 +68,8 @@ module feti_operators
     procedure :: gather_local
     procedure :: estimate_norm_pfp
     procedure :: local_solve
+    procedure, private :: add_bt
+    procedure, private :: b_times
     procedure :: keyed_random
     procedure :: free
   end type feti_t
@@ -149,14 +151,7 @@ contains
         this%e(6*ls - 5:6*ls) = matmul(this%subs(ls)%f, this%subs(ls)%R)
       end do
       call this%local_solve(this%xall)
-      this%wloc2 = 0
-      do ls = 1, this%nlocal
-        associate (bs => this%con%b(ls), o => this%offset(ls))
-          do e = 1, bs%nentries
-            this%wloc2(bs%row(e)) = this%wloc2(bs%row(e)) + bs%val(e)*this%xall(o + bs%dof(e))
-          end do
-        end associate
-      end do
+      call this%b_times(this%xall, this%wloc2)
       call this%con%exchange%scatter_add(this%wloc2, this%d)
       this%d = this%d - this%con%c
       ! lambda~ = G^T (G G^T)^{-1} e
@@ -175,27 +170,13 @@ contains
     class(feti_t), intent(inout) :: this
     real(dp), intent(in) :: x(:)
     real(dp), intent(inout) :: y(:)
-    integer(ip) :: ls, e
 
     call timer_start('F action')
     call this%con%exchange%gather(x, this%wloc)
     this%xall = 0
-    do ls = 1, this%nlocal
-      associate (bs => this%con%b(ls), o => this%offset(ls))
-        do e = 1, bs%nentries
-          this%xall(o + bs%dof(e)) = this%xall(o + bs%dof(e)) + bs%val(e)*this%wloc(bs%row(e))
-        end do
-      end associate
-    end do
+    call this%add_bt(this%wloc, 1.0_dp, this%xall)
     call this%local_solve(this%xall)
-    this%wloc2 = 0
-    do ls = 1, this%nlocal
-      associate (bs => this%con%b(ls), o => this%offset(ls))
-        do e = 1, bs%nentries
-          this%wloc2(bs%row(e)) = this%wloc2(bs%row(e)) + bs%val(e)*this%xall(o + bs%dof(e))
-        end do
-      end associate
-    end do
+    call this%b_times(this%xall, this%wloc2)
     call this%con%exchange%scatter_add(this%wloc2, y)
     this%f_applications = this%f_applications + 1
     call timer_stop('F action')
@@ -286,16 +267,12 @@ contains
     class(feti_t), intent(inout) :: this
     real(dp), intent(in) :: lambda(:), alpha(:)
     type(local_field_t), intent(inout) :: u(:)
-    integer(ip) :: ls, e
+    integer(ip) :: ls
     call this%con%exchange%gather(lambda, this%wloc)
     do ls = 1, this%nlocal
-      associate (bs => this%con%b(ls), o => this%offset(ls))
-        this%xall(o + 1:this%offset(ls + 1)) = this%subs(ls)%f
-        do e = 1, bs%nentries
-          this%xall(o + bs%dof(e)) = this%xall(o + bs%dof(e)) - bs%val(e)*this%wloc(bs%row(e))
-        end do
-      end associate
+      this%xall(this%offset(ls) + 1:this%offset(ls + 1)) = this%subs(ls)%f
     end do
+    call this%add_bt(this%wloc, -1.0_dp, this%xall)
     call this%local_solve(this%xall)
     do ls = 1, this%nlocal
       if (.not. allocated(u(ls)%v)) allocate (u(ls)%v(this%subs(ls)%ndof))
@@ -322,16 +299,12 @@ contains
     class(feti_t), intent(inout) :: this
     real(dp), intent(in) :: x(:)
     type(local_field_t), intent(inout) :: u(:)
-    integer(ip) :: ls, e
+    integer(ip) :: ls
     call this%con%exchange%gather(x, this%wloc)
+    this%xall = 0
+    call this%add_bt(this%wloc, 1.0_dp, this%xall)
     do ls = 1, this%nlocal
-      associate (bs => this%con%b(ls))
-        if (.not. allocated(u(ls)%v)) allocate (u(ls)%v(this%subs(ls)%ndof))
-        u(ls)%v = 0
-        do e = 1, bs%nentries
-          u(ls)%v(bs%dof(e)) = u(ls)%v(bs%dof(e)) + bs%val(e)*this%wloc(bs%row(e))
-        end do
-      end associate
+      u(ls)%v = this%xall(this%offset(ls) + 1:this%offset(ls + 1))
     end do
   end subroutine apply_bt
 
@@ -340,17 +313,44 @@ contains
     class(feti_t), intent(inout) :: this
     type(local_field_t), intent(in) :: u(:)
     real(dp), intent(inout) :: y(:)
-    integer(ip) :: ls, e
-    this%wloc2 = 0
+    integer(ip) :: ls
     do ls = 1, this%nlocal
-      associate (bs => this%con%b(ls))
+      this%xall(this%offset(ls) + 1:this%offset(ls + 1)) = u(ls)%v
+    end do
+    call this%b_times(this%xall, this%wloc2)
+    call this%con%exchange%scatter_add(this%wloc2, y)
+  end subroutine apply_b
+
+  !> xall += scale * B^T lam_local on the concatenated local subdomain vector.
+  subroutine add_bt(this, lam_local, scale, xall)
+    class(feti_t), intent(in) :: this
+    real(dp), intent(in) :: lam_local(:), scale
+    real(dp), intent(inout) :: xall(:)
+    integer(ip) :: ls, e
+    do ls = 1, this%nlocal
+      associate (bs => this%con%b(ls), o => this%offset(ls))
         do e = 1, bs%nentries
-          this%wloc2(bs%row(e)) = this%wloc2(bs%row(e)) + bs%val(e)*u(ls)%v(bs%dof(e))
+          xall(o + bs%dof(e)) = xall(o + bs%dof(e)) + scale*bs%val(e)*lam_local(bs%row(e))
         end do
       end associate
     end do
-    call this%con%exchange%scatter_add(this%wloc2, y)
-  end subroutine apply_b
+  end subroutine add_bt
+
+  !> y_local = B xall (local rows: owned and ghosts, before the scatter-add).
+  subroutine b_times(this, xall, y_local)
+    class(feti_t), intent(in) :: this
+    real(dp), intent(in) :: xall(:)
+    real(dp), intent(out) :: y_local(:)
+    integer(ip) :: ls, e
+    y_local = 0
+    do ls = 1, this%nlocal
+      associate (bs => this%con%b(ls), o => this%offset(ls))
+        do e = 1, bs%nentries
+          y_local(bs%row(e)) = y_local(bs%row(e)) + bs%val(e)*xall(o + bs%dof(e))
+        end do
+      end associate
+    end do
+  end subroutine b_times
 
   !> A dual vector with entries in [-1, 1] that depend only on the rows'
   !> canonical keys, so that it is the same on any number of ranks.
