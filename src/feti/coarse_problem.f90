@@ -25,7 +25,8 @@
 module coarse_problem
   use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_IP
   use errors, only: fatal_error
-  use decomposition, only: decomposition_t
+  use decomposition, only: decomposition_t, subdomain_graph
+  use metis_wrapper, only: metis_node_nd
   use constraints, only: constraints_t
   use mumps_wrapper, only: mumps_t
   use block_hash, only: block_hash_t
@@ -177,7 +178,7 @@ contains
       call this%mumps%init(comm, .true.)
       call this%mumps%set_distributed(this%n, irn, jcn, a)
     end if
-    call this%mumps%set_ordering('auto')
+    call this%mumps%set_ordering('metis', coarse_ordering(dec, layout))
     t0 = MPI_Wtime()
     call this%mumps%factorize()
     this%seconds_factorization = MPI_Wtime() - t0
@@ -233,6 +234,41 @@ contains
       end if
     end subroutine add_product
   end subroutine init
+
+  !> Fill-reducing pivot order of G G^T (perm(dof) = position, MUMPS PERM_IN):
+  !> METIS nested dissection of the subdomain adjacency graph (subdomains
+  !> sharing a node), which is the block pattern of G G^T, each subdomain's 6
+  !> rows kept together. Every rank computes the same order.
+  function coarse_ordering(dec, layout) result(perm)
+    type(decomposition_t), intent(in) :: dec
+    type(coarse_layout_t), intent(in) :: layout
+    integer(ip), allocatable :: perm(:)
+    integer(ip), allocatable :: xadj(:), adjncy(:), pxadj(:), padj(:), id_at(:), order(:), position(:)
+    integer(ip) :: n, p, s, k, q
+    call subdomain_graph(dec, xadj, adjncy)
+    n = layout%nsub
+    allocate (id_at(n), pxadj(n + 1), padj(size(adjncy)), order(n), position(n), perm(6*n))
+    do s = 1, n
+      id_at(layout%position(s)) = s
+    end do
+    ! the same graph with vertices numbered by coarse position
+    pxadj(1) = 1
+    q = 0
+    do p = 1, n
+      s = id_at(p)
+      do k = xadj(s), xadj(s + 1) - 1
+        q = q + 1
+        padj(q) = layout%position(adjncy(k))
+      end do
+      pxadj(p + 1) = q + 1
+    end do
+    call metis_node_nd(n, pxadj, padj(1:q), order, position)
+    do p = 1, n
+      do k = 1, 6
+        perm(6*(p - 1) + k) = 6*(position(p) - 1) + k
+      end do
+    end do
+  end function coarse_ordering
 
   !> x = (G G^T)^{-1} b for local coarse blocks b (6*nlocal); x may alias b's
   !> storage only through separate actual arguments. Collective.
