@@ -4,25 +4,27 @@
 !> timing table. Returns the exit status of the run.
 module contact_run
   use, intrinsic :: iso_fortran_env, only: output_unit
-  use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_IP, name_len
+  use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_IP, MPI_INT_I8
   use errors, only: exit_not_converged, exit_kkt_failed
   use logger, only: log_section, log_message, log_is_root
-  use timers, only: timer_start, timer_stop, timers_reduce, timer_stat_t
+  use timers, only: timer_start, timer_stop, timers_reduce, timer_stat_t, timer_seconds
   use params, only: params_t, params_json
   use box_mesh, only: box_mesh_t
   use assembly, only: subdomain_von_mises
   use constraints, only: row_contact
   use feti_operators, only: feti_t, local_field_t
-  use qp_problem, only: qp_status_name
+  use qp_problem, only: qp_status_name, qp_problem_t
   use dual_problem, only: dual_problem_t
+  use dual_problem_orth, only: dual_problem_orth_t
+  use orthonormal_coarse, only: check_orthonormal_size
   use smalbe, only: smalbe_t
-  use reconstruction, only: dual_gradient, alpha_new, alpha_standard, standard_cost_t, coarse_vector_norm, &
-                            active_contact_mask
+  use reconstruction, only: dual_gradient, alpha_new, alpha_orthonormal, alpha_standard, standard_cost_t, &
+                            coarse_vector_norm, active_contact_mask
   use kkt, only: kkt_residuals_t, check_kkt
   use hdf5_output, only: output_fields_t, write_fields, check_output_directory
   use json_writer, only: json_writer_t
   use report, only: print_timing_table, timings_json, memory_json
-  use mpi_f08, only: MPI_Comm, MPI_Comm_size, MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_Barrier
+  use mpi_f08, only: MPI_Comm, MPI_Comm_size, MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_Barrier, MPI_IN_PLACE
   implicit none
   private
 
@@ -43,7 +45,10 @@ contains
     type(MPI_Comm), intent(in) :: comm
     integer, intent(out) :: status
     type(feti_t), target :: op
-    type(dual_problem_t) :: problem
+    type(dual_problem_t), target :: problem_hat
+    type(dual_problem_orth_t), target :: problem_orth
+    class(qp_problem_t), pointer :: problem             ! one of the two, by &solver coarse
+    real(dp) :: rho, scale
     type(smalbe_t) :: solver
     real(dp), allocatable :: nu(:), lambda(:), g(:), a_new(:), a_std(:), alpha_bar(:)
     type(local_field_t), allocatable :: u(:)
@@ -51,16 +56,20 @@ contains
     type(kkt_residuals_t) :: res
     type(contact_summary_t) :: contact
     type(timer_stat_t), allocatable :: stats(:)
-    real(dp) :: alpha_difference, a_norm
+    real(dp) :: alpha_difference, a_norm, f_seconds, in_solve(3)
+    integer(i8) :: mine_bytes, f_bytes
+    integer :: k
     integer(ip) :: nactive
     integer :: nranks, ierr
     character(len=200) :: line
-    logical :: converged, kkt_ok
+    logical :: converged, kkt_ok, orthonormal
     logical, allocatable :: active(:)
 
     status = 0
     call MPI_Comm_size(comm, nranks, ierr)
     if (p%output%write_hdf5 .or. p%output%write_report) call check_output_directory(comm, p%output%directory)
+    orthonormal = p%solver%coarse == 'cholesky'     ! explicit G~ = L^{-1} G, paper Eq. 25
+    if (orthonormal) call check_orthonormal_size(product(p%mesh%nsub), comm)
     call MPI_Barrier(comm, ierr)
     call timer_start('total')
 
@@ -75,25 +84,39 @@ contains
       op%con%n_contact_global, '), coarse dimension ', 6*op%dec%nsubdomains
     call log_message(line)
     call timer_start('dual setup')
-    call problem%init(op, p%solver%rho_scale)
+    if (orthonormal) then
+      call problem_orth%init(op, p%solver%rho_scale)
+      problem => problem_orth
+      rho = problem_orth%rho
+      scale = problem_orth%scale
+    else
+      call problem_hat%init(op, p%solver%rho_scale)
+      problem => problem_hat
+      rho = problem_hat%rho
+      scale = problem_hat%scale
+    end if
     call timer_stop('dual setup')
-    write (line, '(a,es10.3,a,es10.3)') '||P F P|| ~ ', op%norm_pfp, ', rho = ', problem%rho
+    write (line, '(a,es10.3,a,es10.3)') '||P F P|| ~ ', op%norm_pfp, ', rho = ', rho
     call log_message(line)
 
     ! 2. SMALBE (outer) + MPRGP (inner); ||A|| = max(||P F P||, rho): P F P and rho Q act on
     !    complementary subspaces; the QP is scaled by 1/||P F P|| (see dual_problem)
     call log_section('SMALBE / MPRGP')
-    a_norm = max(op%norm_pfp, problem%rho)/problem%scale
+    a_norm = max(op%norm_pfp, rho)/scale
     call solver%init_from_params(p%solver, a_norm)
     allocate (nu(op%con%n_own), lambda(op%con%n_own), g(op%con%n_own))
     nu = 0
+    in_solve = [timer_seconds('F action'), timer_seconds('coarse solve')]
     call timer_start('solve')
     call solver%solve(problem, nu)
     call timer_stop('solve')
+    in_solve = [timer_seconds('F action'), timer_seconds('coarse solve'), timer_seconds('solve')] - &
+               [in_solve(1), in_solve(2), 0.0_dp]
+    call MPI_Allreduce(MPI_IN_PLACE, in_solve, 3, MPI_REAL_DP, MPI_MAX, comm, ierr)
     converged = solver%converged()
     lambda = nu + op%lambda_tilde
 
-    ! 3. reconstruction: alpha_bar new (Eq. 24) and standard (Eq. 10), then u
+    ! 3. reconstruction: alpha_bar new (Eq. 24, or Eq. 25 with the explicit G~) and standard (Eq. 10), then u
     call log_section('Reconstruction')
     allocate (a_new(6*op%nlocal), a_std(6*op%nlocal), u(op%nlocal))
     call timer_start('dual gradient')
@@ -102,7 +125,13 @@ contains
     a_new = 0
     a_std = 0
     alpha_difference = -1
-    if (p%reconstruction%method /= 'standard') call alpha_new(op, g, problem%unscaled_multiplier(solver%muhat), a_new)
+    if (p%reconstruction%method /= 'standard') then
+      if (orthonormal) then
+        call alpha_orthonormal(problem_orth%orth, g, problem_orth%unscaled_multiplier(solver%muhat), a_new)
+      else
+        call alpha_new(op, g, problem_hat%unscaled_multiplier(solver%muhat), a_new)
+      end if
+    end if
     if (p%reconstruction%method /= 'new') then
       call alpha_standard(op, lambda, g, p%reconstruction%active_tol, a_std, std_cost)
       write (line, '(a,3(es10.3,a))') 'standard formula: assembly ', std_cost%assembly, ' s, factorization ', &
@@ -143,6 +172,13 @@ contains
     call log_message(line)
 
     call timers_reduce(comm, stats)
+    ! bytes one F action reads on all ranks, and the time of one F action
+    mine_bytes = op%bytes_per_f_action()
+    call MPI_Allreduce(mine_bytes, f_bytes, 1, MPI_INT_I8, MPI_SUM, comm, ierr)
+    f_seconds = 0
+    do k = 1, size(stats)
+      if (stats(k)%name == 'F action') f_seconds = stats(k)%max/max(op%f_applications, 1_i8)
+    end do
     call log_section('Timings [s] (min / max / mean over ranks)')
     call print_timing_table(stats)
     if (p%output%write_report) call write_report()
@@ -158,7 +194,8 @@ contains
     else
       call log_message('feticontact: converged, KKT check passed')
     end if
-    call problem%free()
+    call problem_hat%free()
+    call problem_orth%free()
     call op%free()
 
   contains
@@ -195,7 +232,7 @@ contains
       call js%add('projected_gradient', solver%gp_norm)
       call js%add('equality_residual', solver%cnorm)
       call js%add('norm_b', solver%norm_b)
-      call js%add('rho', problem%rho)
+      call js%add('rho', rho)
       call js%add('norm_pfp', op%norm_pfp)
       call js%add('f_applications', op%f_applications)
       call js%add('coarse_solves', op%coarse_solves)
@@ -234,6 +271,15 @@ contains
       call js%add('contact_radius', contact%contact_radius)
       call js%end_object()
       call js%add_raw('memory', memory)
+      call js%begin_object('performance')
+      call js%add('f_bytes_per_action_sum', f_bytes)
+      call js%add('f_action_seconds_per_call', f_seconds)
+      call js%add('f_bandwidth_bytes_per_second', real(f_bytes, dp)/max(f_seconds, tiny(1.0_dp)))
+      call js%add('solve_seconds', in_solve(3))
+      call js%add('solve_f_action_seconds', in_solve(1))
+      call js%add('solve_coarse_seconds', in_solve(2))
+      call js%add('solve_coarse_share', in_solve(2)/max(in_solve(3), tiny(1.0_dp)))
+      call js%end_object()
       call js%end_object()
       call js%write_file(trim(p%output%directory)//'/report.json', comm)
     end subroutine write_report

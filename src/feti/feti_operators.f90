@@ -68,6 +68,7 @@ module feti_operators
     procedure :: gather_local
     procedure :: estimate_norm_pfp
     procedure :: local_solve
+    procedure :: bytes_per_f_action
     procedure, private :: add_bt
     procedure, private :: b_times
     procedure :: keyed_random
@@ -279,6 +280,28 @@ contains
       u(ls)%v = this%xall(this%offset(ls) + 1:this%offset(ls + 1)) + matmul(this%subs(ls)%R, alpha(6*ls - 5:6*ls))
     end do
   end subroutine primal
+
+  !> Bytes one F action must read on this rank: the factors of K_reg twice
+  !> (forward and backward substitution) and the entries of B twice (B^T,
+  !> then B; 16 bytes each: value, row, dof). Vectors are not counted.
+  integer(i8) function bytes_per_f_action(this)
+    class(feti_t), intent(in) :: this
+    integer(ip) :: ls
+    integer(i8) :: factors, entries
+    factors = 0
+    if (this%block_solver) then
+      factors = this%kblock%factor_bytes()
+    else
+      do ls = 1, this%nlocal
+        factors = factors + this%kplus(ls)%factor_bytes()
+      end do
+    end if
+    entries = 0
+    do ls = 1, this%nlocal
+      entries = entries + this%con%b(ls)%nentries
+    end do
+    bytes_per_f_action = 2*factors + 2*16*entries
+  end function bytes_per_f_action
 
   !> x <- K^+ x for the concatenated vector of all local subdomains.
   subroutine local_solve(this, x)
