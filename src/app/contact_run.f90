@@ -106,7 +106,7 @@ contains
     call solver%init_from_params(p%solver, a_norm)
     allocate (nu(op%con%n_own), lambda(op%con%n_own), g(op%con%n_own))
     nu = 0
-    in_solve = [timer_seconds('F action'), timer_seconds('coarse solve')]
+    in_solve = [timer_seconds('F action'), timer_seconds('coarse solve'), 0.0_dp]
     call timer_start('solve')
     call solver%solve(problem, nu)
     call timer_stop('solve')
