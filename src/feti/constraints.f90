@@ -185,8 +185,10 @@ contains
 
     ! 4. B^s entries per local subdomain.
     allocate (con%b(size(subs)))
+    do i = 1, nrec
+      con%b(rec(i)%sub)%nentries = con%b(rec(i)%sub)%nentries + 1
+    end do
     do ls = 1, size(subs, kind=ip)
-      con%b(ls)%nentries = count(rec(:)%sub == ls)
       allocate (con%b(ls)%row(con%b(ls)%nentries), con%b(ls)%dof(con%b(ls)%nentries), &
                 con%b(ls)%val(con%b(ls)%nentries), con%b(ls)%g(6, con%b(ls)%nentries), &
                 con%b(ls)%slot(con%b(ls)%nentries))
