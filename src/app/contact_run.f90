@@ -284,7 +284,8 @@ contains
       call js%write_file(trim(p%output%directory)//'/report.json', comm)
     end subroutine write_report
 
-    !> The mean over ranks of a timer, as JSON (null if it never ran).
+    !> The max over ranks of a timer (the time the run waited for it), as
+    !> JSON (null if it never ran).
     function stat_json(name) result(json)
       character(len=*), intent(in) :: name
       character(len=:), allocatable :: json

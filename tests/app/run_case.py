@@ -34,7 +34,8 @@ def parse_namelist(text):
     """Groups of a simple namelist file: {group: [(variable, raw value text)]}."""
     text = re.sub(r"!.*", "", text)
     groups = {}
-    for m in re.finditer(r"&(\w+)(.*?)/", text, re.S):
+    # a group ends at the first '/' outside quotes
+    for m in re.finditer(r"&(\w+)((?:'[^']*'|\"[^\"]*\"|[^'\"/])*)/", text, re.S):
         body = m.group(2)
         starts = [a.start() for a in re.finditer(r"\w+(\([^)]*\))?\s*=", body)]
         items = []

@@ -1,0 +1,110 @@
+#!/usr/bin/python3
+"""CTest check of tools/campaign.py and tools/plots.py on a tiny `block` case.
+
+    check_campaign.py --program feticontact --mpiexec mpiexec --workdir DIR
+
+Runs one campaign of two members on 1 rank, 1 repetition: the tiny block input
+as it is (must converge) and with solver:max_hessian=1 (must fail with exit 3
+and still be a row of the CSV). Checks the CSV columns, the converged row
+(iteration counts, KKT residuals, times, the exact solution's contact force
+p Lx Ly), the recorded failure, the namelist merge (quoted '/' and '!'), and
+that tools/plots.py makes its figures from that CSV. Exit 0 when all pass.
+"""
+import argparse
+import csv
+import os
+import subprocess
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+TOOLS = os.path.join(ROOT, "tools")
+FAILURES = []
+
+
+def check(condition, what):
+    print(("ok   " if condition else "FAIL ") + what)
+    if not condition:
+        FAILURES.append(what)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--program", required=True)
+    ap.add_argument("--mpiexec", required=True)
+    ap.add_argument("--workdir", required=True)
+    args = ap.parse_args()
+    out = os.path.join(args.workdir, "campaign")
+    cmd = [sys.executable, os.path.join(TOOLS, "campaign.py"), "--program", args.program, "--mpiexec", args.mpiexec,
+           "--ranks", "1", "--reps", "1", "--timeout", "60", "--out", out,
+           "--sweep", "solver:max_hessian=20000,1", os.path.join(HERE, "tiny_block.nml")]
+    print("running:", " ".join(cmd))
+    run = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    print(run.stdout[-3000:], run.stderr[-3000:])
+    check(run.returncode == 1, "campaign exit status 1 (one run failed on purpose), got %d" % run.returncode)
+    csv_path = os.path.join(out, "campaign.csv")
+    check(os.path.exists(csv_path), "campaign.csv written")
+    if FAILURES:
+        return 1
+    with open(csv_path, newline="") as f:
+        reader = csv.DictReader(f)
+        cols = reader.fieldnames
+        rows = list(reader)
+    need = ["member", "input", "overrides", "ranks", "rep", "exit_status", "status", "wall_seconds", "case",
+            "subdomains", "primal_dofs", "dual_dofs", "coarse_dim", "contact_rows", "active_contact", "converged",
+            "outer_iterations", "hessian_multiplications", "cg_steps", "expansion_steps", "proportioning_steps",
+            "kkt_equilibrium", "kkt_equality", "kkt_feasibility", "kkt_dual_feasibility", "kkt_complementarity",
+            "kkt_max", "alpha_difference", "rec_new_seconds", "rec_standard_seconds", "contact_total_force",
+            "contact_max_pressure", "contact_active_nodes", "contact_radius", "peak_rss_max_bytes",
+            "peak_rss_sum_bytes", "t_total_mean", "t_total_max", "t_solve_mean", "t_solve_max",
+            "t_factorization_mean", "t_rec_new_max", "t_rec_standard_max", "h5", "run_dir"]
+    missing = [c for c in need if c not in cols]
+    check(not missing, "CSV has the expected columns (missing: %s)" % missing)
+    check(len(rows) == 2, "two rows, one per run (got %d)" % len(rows))
+    good = [r for r in rows if r["member"] == "tiny_block[max_hessian=20000]"]
+    bad = [r for r in rows if r["member"] == "tiny_block[max_hessian=1]"]
+    check(len(good) == 1 and len(bad) == 1, "one row per member")
+    if len(good) == 1:
+        r = good[0]
+        check(r["exit_status"] == "0" and r["status"] == "ok", "converged run: exit 0")
+        check(r["converged"] == "true", "converged run: converged = true")
+        check(r["case"] == "tiny_block" and r["ranks"] == "1" and r["rep"] == "1", "case name, ranks, rep")
+        check(r["subdomains"] == "2" and r["coarse_dim"] == "12", "2 subdomains, coarse dimension 12")
+        check(r["nsub"] == "2x1x1" and r["nel"] == "2x2x2", "nsub and nel columns")
+        check(int(r["hessian_multiplications"]) >= int(r["outer_iterations"]) >= 1, "Hessian mults >= outer >= 1")
+        check(int(r["contact_rows"]) == int(r["active_contact"]) == 5 * 3, "every one of 15 contact rows active")
+        check(float(r["kkt_max"]) <= 1e-6, "KKT residuals small (%s)" % r["kkt_max"])
+        force = float(r["contact_total_force"])
+        check(abs(force - 100.0) <= 1e-6 * 100, "contact force = p Lx Ly = 100 (got %s)" % force)
+        check(float(r["t_total_max"]) >= float(r["t_solve_max"]) > 0, "times: total >= solve > 0")
+        check(float(r["t_total_max"]) >= float(r["t_total_mean"]) > 0, "times: max >= mean")
+        check(float(r["peak_rss_sum_bytes"]) >= float(r["peak_rss_max_bytes"]) > 0, "peak RSS recorded")
+        check(os.path.exists(r["h5"]), "the run's .h5 is kept")
+        with open(os.path.join(r["run_dir"], "case.nml")) as f:
+            nml = f.read()
+        check("run_name = 'tiny_block'" in nml and "monitor = .false." in nml,
+              "merged input keeps the other variables")
+        check("max_hessian = 20000" in nml and os.path.join(r["run_dir"], "out") in nml,
+              "merged input has the override and the run's output directory")
+    if len(bad) == 1:
+        r = bad[0]
+        check(r["exit_status"] == "3" and r["status"] == "not converged",
+              "failed run recorded with exit status 3 (got %s, %s)" % (r["exit_status"], r["status"]))
+        check(r["converged"] == "false", "failed run: converged = false (its report.json is read)")
+    check("FAILED: tiny_block[max_hessian=1]" in run.stdout, "the summary names the failed run")
+
+    figures = os.path.join(args.workdir, "figures")
+    for sub in (["weak", out, "--name", "t_weak"], ["reconstruction", out, "--name", "t_rec"]):
+        p = subprocess.run([sys.executable, os.path.join(TOOLS, "plots.py"), "--figures", figures] + sub,
+                           capture_output=True, text=True, timeout=60)
+        print(p.stdout[-2000:], p.stderr[-2000:])
+        check(p.returncode == 0, "plots.py %s exits 0" % sub[0])
+    for name in ("t_weak_iterations", "t_weak_times", "t_rec"):
+        check(os.path.getsize(os.path.join(figures, name + ".png")) > 1000 if os.path.exists(
+            os.path.join(figures, name + ".png")) else False, "%s.png written" % name)
+    print("%d failed" % len(FAILURES))
+    return 1 if FAILURES else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
