@@ -10,7 +10,15 @@
 !>   SMALBE multiplier in hat form: one coarse solve and a vector subtraction;
 !> - standard (Eq. 10): A = equality rows + contact rows with lambda_i >
 !>   active_tol * max(lambda_I); G_A G_A^T assembled anew (distributed) and
-!>   factorized by MUMPS, alpha_bar = (G_A G_A^T)^{-1} G_A g_A.
+!>   factorized by MUMPS, alpha_bar = (G_A G_A^T)^{-1} G_A g_A;
+!> - new with the explicit G~ = L^{-1} G (Eq. 25, &solver coarse = 'cholesky',
+!>   mu carried directly): in the orthonormalized basis R~ = R L^{-T} of the
+!>   kernel (B R~ = G~^T, G~ G~^T = I) Eq. 14 reads alpha~ = G~ g (one
+!>   MPI_Allreduce of 6N values) and Eq. 25 is alpha~_bar = alpha~ - mu, a
+!>   subtraction; u needs the amplitudes of the subdomains' own R, alpha_bar =
+!>   L^{-T} alpha~_bar: one triangular solve with the replicated factor L on
+!>   every rank (no assembly, no factorization, no communication).
+!>   See docs/THEORY.md, "Reconstruction".
 !> Timers 'rec new' and 'rec standard'; the standard formula's parts are
 !> returned in standard_cost_t (assembly, factorization, solve).
 module reconstruction
@@ -18,11 +26,12 @@ module reconstruction
   use timers, only: timer_start, timer_stop
   use feti_operators, only: feti_t, local_field_t
   use coarse_problem, only: coarse_problem_t
+  use orthonormal_coarse, only: orthonormal_coarse_t
   use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_Wtime
   implicit none
   private
 
-  public :: dual_gradient, alpha_new, alpha_standard, active_contact_mask, coarse_vector_norm
+  public :: dual_gradient, alpha_new, alpha_orthonormal, alpha_standard, active_contact_mask, coarse_vector_norm
 
   !> Seconds of the parts of the standard formula on this rank.
   type, public :: standard_cost_t
@@ -55,6 +64,26 @@ contains
     alpha_bar = alpha_bar - muhat
     call timer_stop('rec new')
   end subroutine alpha_new
+
+  !> Eq. 25 with the explicit G~ (orth from dual_problem_orth, mu its SMALBE
+  !> multiplier, unscaled, replicated): alpha~_bar = G~ g - mu in the basis
+  !> R~ = R L^{-T}, returned in `alpha_tilde_bar` (replicated, optional), and
+  !> alpha_bar = L^{-T} alpha~_bar as local coarse blocks for feti_t%primal.
+  subroutine alpha_orthonormal(orth, g, mu, alpha_bar, alpha_tilde_bar)
+    type(orthonormal_coarse_t), intent(inout) :: orth
+    real(dp), intent(in) :: g(:), mu(:)
+    real(dp), intent(out) :: alpha_bar(:)
+    real(dp), intent(out), optional :: alpha_tilde_bar(:)
+    real(dp), allocatable :: z(:)
+    call timer_start('rec new')
+    allocate (z(orth%n))
+    call orth%apply(g, z)                 ! alpha~ = G~ g          (Eq. 14, basis R~)
+    z = z - mu                            ! alpha~_bar = alpha~ - mu (Eq. 25)
+    if (present(alpha_tilde_bar)) alpha_tilde_bar = z
+    call orth%backward_solve(z)           ! alpha_bar = L^{-T} alpha~_bar (basis R)
+    call orth%to_local(z, alpha_bar)
+    call timer_stop('rec new')
+  end subroutine alpha_orthonormal
 
   !> The rows of A: every equality row, and the contact rows whose multiplier
   !> exceeds active_tol times the largest contact multiplier.

@@ -14,6 +14,7 @@ import argparse
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -185,6 +186,7 @@ def main():
     ap.add_argument("--timeout", type=int, default=600)
     args = ap.parse_args()
 
+    shutil.rmtree(os.path.join(args.workdir, "out"), ignore_errors=True)   # no stale outputs
     path, groups = merged_input(args)
     cmd = [args.mpiexec, "--oversubscribe", "--bind-to", "none", "-n", str(args.ranks), args.program, path]
     print("running:", " ".join(cmd))
