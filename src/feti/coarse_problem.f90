@@ -35,7 +35,7 @@ module coarse_problem
   implicit none
   private
 
-  public :: coarse_layout_t, build_coarse_layout
+  public :: coarse_layout_t, build_coarse_layout, owned_row_blocks, row_blocks
 
   !> Where the coarse blocks of every subdomain live.
   type :: coarse_layout_t
@@ -110,11 +110,11 @@ contains
     type(MPI_Comm), intent(in) :: comm
     logical, intent(in), optional :: mask(:)
     character(len=*), intent(in), optional :: placement
-    real(dp), allocatable :: slots_local(:, :), slots_own(:, :)
-    integer(ip) :: copies(8), ncopies
+    real(dp), allocatable :: slots_own(:, :)
     integer(ip), allocatable :: irn(:), jcn(:)
     real(dp), allocatable :: a(:)
-    integer(ip) :: ls, e, i, j1, j2, ps, pt, m, index, kind
+    integer(ip) :: i, j1, j2, nb, pos(8)
+    real(dp) :: blk(6, 8)
     integer :: rank, ierr
     type(block_hash_t) :: blocks
     real(dp) :: t0
@@ -125,19 +125,8 @@ contains
     this%n = 6*layout%nsub
     call MPI_Comm_rank(comm, rank, ierr)
 
-    ! 1. the 6-blocks of every local row, by copy slot; summed at the owner
-    allocate (slots_local(48, con%n_local), slots_own(48, con%n_own))
-    slots_local = 0
-    do ls = 1, size(con%b, kind=ip)
-      associate (bs => con%b(ls))
-        do e = 1, bs%nentries
-          i = 6*(bs%slot(e) - 1)
-          slots_local(i + 1:i + 6, bs%row(e)) = slots_local(i + 1:i + 6, bs%row(e)) + bs%g(:, e)
-        end do
-      end associate
-    end do
-    call con%exchange%scatter_add_multi(48, slots_local, slots_own)
-    deallocate (slots_local)
+    ! 1. the 6-blocks of every row, by copy slot, summed at the owner
+    call owned_row_blocks(con, slots_own)
 
     ! 2. g_r g_r^T of every owned row into 6x6 blocks
     call blocks%init(max(64_ip, 8*layout%nlocal + con%n_own/4))
@@ -145,23 +134,12 @@ contains
       if (present(mask)) then
         if (.not. mask(i)) cycle
       end if
-      call dec%node_subdomain_list(con%node(i), copies, ncopies)
-      kind = int(mod(con%key(i)/8, 4_i8), ip)
-      index = int(mod(con%key(i), 8_i8), ip) + 1
-      if (kind == 0) then          ! gluing row k = index: copies 1..k+1
-        m = index + 1
-        do j1 = 1, m
-          do j2 = j1, m
-            ps = layout%position(copies(j1))
-            pt = layout%position(copies(j2))
-            call add_product(ps, pt, slots_own(6*j1 - 5:6*j1, i), slots_own(6*j2 - 5:6*j2, i))
-          end do
+      call row_blocks(dec, con, layout, slots_own, i, nb, pos, blk)
+      do j1 = 1, nb
+        do j2 = j1, nb
+          call add_product(pos(j1), pos(j2), blk(:, j1), blk(:, j2))
         end do
-      else                         ! Dirichlet (copy `index`) or contact (copy 1): one block
-        j1 = merge(index, 1_ip, kind == 1)
-        ps = layout%position(copies(j1))
-        call add_product(ps, ps, slots_own(6*j1 - 5:6*j1, i), slots_own(6*j1 - 5:6*j1, i))
-      end if
+      end do
     end do
 
     ! 3. COO of the upper triangle, to MUMPS
@@ -234,6 +212,49 @@ contains
       end if
     end subroutine add_product
   end subroutine init
+
+  !> The column of G of every owned row, by copy slot: slots(6(j-1)+1:6j, i) is
+  !> the 6-block of row i on the j-th subdomain copy of its node (zero where
+  !> the row does not touch that copy). Each rank computes the blocks of its
+  !> own subdomains; one neighbour scatter-add sums them at the row's owner.
+  subroutine owned_row_blocks(con, slots_own)
+    type(constraints_t), intent(inout) :: con
+    real(dp), allocatable, intent(out) :: slots_own(:, :)
+    real(dp), allocatable :: slots_local(:, :)
+    integer(ip) :: ls, e, i
+    allocate (slots_local(48, con%n_local), slots_own(48, con%n_own))
+    slots_local = 0
+    do ls = 1, size(con%b, kind=ip)
+      associate (bs => con%b(ls))
+        do e = 1, bs%nentries
+          i = 6*(bs%slot(e) - 1)
+          slots_local(i + 1:i + 6, bs%row(e)) = slots_local(i + 1:i + 6, bs%row(e)) + bs%g(:, e)
+        end do
+      end associate
+    end do
+    call con%exchange%scatter_add_multi(48, slots_local, slots_own)
+  end subroutine owned_row_blocks
+
+  !> The nonzero 6-blocks of owned row i of G^T and the coarse positions of
+  !> their subdomains: blk(:, 1:nb), pos(1:nb).
+  subroutine row_blocks(dec, con, layout, slots_own, i, nb, pos, blk)
+    type(decomposition_t), intent(in) :: dec
+    type(constraints_t), intent(in) :: con
+    type(coarse_layout_t), intent(in) :: layout
+    real(dp), intent(in) :: slots_own(:, :)
+    integer(ip), intent(in) :: i
+    integer(ip), intent(out) :: nb, pos(8)
+    real(dp), intent(out) :: blk(6, 8)
+    integer(ip) :: copies(8), ncopies, j
+    call dec%node_subdomain_list(con%node(i), copies, ncopies)
+    nb = 0
+    do j = 1, ncopies
+      if (all(slots_own(6*j - 5:6*j, i) == 0)) cycle
+      nb = nb + 1
+      pos(nb) = layout%position(copies(j))
+      blk(:, nb) = slots_own(6*j - 5:6*j, i)
+    end do
+  end subroutine row_blocks
 
   !> Fill-reducing pivot order of G G^T (perm(dof) = position, MUMPS PERM_IN):
   !> METIS nested dissection of the subdomain adjacency graph (subdomains

@@ -36,7 +36,7 @@ module orthonormal_coarse
   use errors, only: collective_error, exit_input_error, exit_internal
   use decomposition, only: decomposition_t
   use constraints, only: constraints_t
-  use coarse_problem, only: coarse_layout_t
+  use coarse_problem, only: coarse_layout_t, owned_row_blocks, row_blocks
   use mpi_f08, only: MPI_Comm, MPI_Allreduce, MPI_Allgatherv, MPI_IN_PLACE, MPI_SUM, &
                      MPI_MAX, MPI_Wtime, MPI_INTEGER
   implicit none
@@ -140,9 +140,9 @@ contains
     type(constraints_t), intent(inout) :: con
     type(coarse_layout_t), intent(in) :: layout
     type(MPI_Comm), intent(in) :: comm
-    real(dp), allocatable :: slots_local(:, :), slots_own(:, :)
+    real(dp), allocatable :: slots_own(:, :)
     integer(ip), allocatable :: first(:), per_block(:), group_of_block(:)
-    integer(ip) :: ls, e, i, j, a, b, k, g, p, nb, pos(8), r0, h, kk
+    integer(ip) :: ls, i, j, a, b, k, g, p, nb, pos(8), r0, h, kk
     real(dp) :: blk(6, 8), t0
     integer(i8) :: total
     integer :: ierr, info, worst
@@ -162,26 +162,15 @@ contains
       this%local_position(ls) = layout%position(dec%local_subdomains(ls))
     end do
 
-    ! 1. the 6-blocks of every local row, by copy slot, summed at the row's owner
+    ! 1. the 6-blocks of every row, by copy slot, summed at the row's owner
     t0 = MPI_Wtime()
-    allocate (slots_local(48, con%n_local), slots_own(48, con%n_own))
-    slots_local = 0
-    do ls = 1, size(con%b, kind=ip)
-      associate (bs => con%b(ls))
-        do e = 1, bs%nentries
-          i = 6*(bs%slot(e) - 1)
-          slots_local(i + 1:i + 6, bs%row(e)) = slots_local(i + 1:i + 6, bs%row(e)) + bs%g(:, e)
-        end do
-      end associate
-    end do
-    call con%exchange%scatter_add_multi(48, slots_local, slots_own)
-    deallocate (slots_local)
+    call owned_row_blocks(con, slots_own)
 
     ! 2. G G^T = sum over rows of g_r g_r^T, dense; first block of every column
     allocate (this%l(this%n, this%n), first(this%n_own))
     this%l = 0
     do i = 1, this%n_own
-      call row_blocks(i, nb, pos, blk)
+      call row_blocks(dec, con, layout, slots_own, i, nb, pos, blk)
       first(i) = this%nsub
       if (nb > 0) first(i) = minval(pos(1:nb))
       do b = 1, nb
@@ -244,7 +233,7 @@ contains
       this%column_row(this%group_col(g) + kk) = i
       r0 = this%group_row(g)
       h = this%n - r0 + 1
-      call row_blocks(i, nb, pos, blk)
+      call row_blocks(dec, con, layout, slots_own, i, nb, pos, blk)
       do a = 1, nb
         this%values(this%group_offset(g) + int(kk, i8)*h + 6*pos(a) - 5 - r0 + 1: &
                     this%group_offset(g) + int(kk, i8)*h + 6*pos(a) - r0 + 1) = blk(:, a)
@@ -258,24 +247,6 @@ contains
     end do
     this%seconds_columns = MPI_Wtime() - t0
     allocate (this%xs(this%n_own), this%ys(this%n_own), this%zw(this%n))
-
-  contains
-
-    !> The nonzero 6-blocks of column i of G (owned row i) and their coarse positions.
-    subroutine row_blocks(i, nb, pos, blk)
-      integer(ip), intent(in) :: i
-      integer(ip), intent(out) :: nb, pos(8)
-      real(dp), intent(out) :: blk(6, 8)
-      integer(ip) :: copies(8), ncopies, j
-      call dec%node_subdomain_list(con%node(i), copies, ncopies)
-      nb = 0
-      do j = 1, ncopies
-        if (all(slots_own(6*j - 5:6*j, i) == 0)) cycle
-        nb = nb + 1
-        pos(nb) = layout%position(copies(j))
-        blk(:, nb) = slots_own(6*j - 5:6*j, i)
-      end do
-    end subroutine row_blocks
   end subroutine init
 
   !> z = G~ x (replicated, length n) for owned x: local products and one

@@ -9,7 +9,6 @@ program test_feti_operators
   use assertions, only: assert_true, assert_below, assert_equal, test_finish
   use params, only: params_t
   use feti_operators, only: feti_t, local_field_t
-  use constraints, only: row_contact
   use feti_test_support, only: small_case, gather_keyed, coarse_norm
   use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_COMM_SELF, MPI_Comm_rank, MPI_Comm_size, MPI_Comm, &
                      MPI_Gatherv, MPI_Allgather, MPI_INTEGER, MPI_DOUBLE_PRECISION, MPI_Barrier
@@ -31,7 +30,7 @@ contains
     type(params_t), intent(in) :: p
     character(len=*), intent(in) :: label
     logical, intent(in) :: check_rank
-    type(feti_t) :: op, serial
+    type(feti_t) :: op
     real(dp), allocatable :: x(:), y(:), px(:), ppx(:), fx(:), fy(:), z(:), z2(:)
     type(local_field_t), allocatable :: u(:)
     integer(ip) :: n
