@@ -181,6 +181,8 @@ contains
     end do
     call log_section('Timings [s] (min / max / mean over ranks)')
     call print_timing_table(stats)
+    call log_message("('F action' and 'coarse solve' are parts of the phases that use them: dual setup, solve, "// &
+                     "reconstruction)")
     if (p%output%write_report) call write_report()
 
     if (.not. converged) then
