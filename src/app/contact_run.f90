@@ -327,12 +327,12 @@ contains
         area = mesh%h(1)*mesh%h(2)
         if (ijk(1) == 0 .or. ijk(1) == mesh%ng(1)) area = area/2
         if (ijk(2) == 0 .or. ijk(2) == mesh%ng(2)) area = area/2
-        pressure(i) = lambda(i)/area
+        pressure(i) = op%con%scale(i)*lambda(i)/area
       end do
-      mine(1) = sum(lambda, mask=op%is_contact)
+      mine(1) = sum(op%con%scale*lambda, mask=op%is_contact)
       call MPI_Allreduce(mine(1), total(1), 1, MPI_REAL_DP, MPI_SUM, op%comm, ierr)
       mine(1) = 0
-      if (any(op%is_contact)) mine(1) = maxval(lambda, mask=op%is_contact)
+      if (any(op%is_contact)) mine(1) = maxval(op%con%scale*lambda, mask=op%is_contact)
       call MPI_Allreduce(mine(1), biggest, 1, MPI_REAL_DP, MPI_MAX, op%comm, ierr)
       threshold = p%reconstruction%active_tol*max(biggest, 0.0_dp)
       mine = 0
@@ -340,7 +340,7 @@ contains
       do i = 1, n
         if (.not. op%is_contact(i)) cycle
         mine(1) = max(mine(1), pressure(i))
-        if (lambda(i) > threshold .and. lambda(i) > 0) then
+        if (op%con%scale(i)*lambda(i) > threshold .and. lambda(i) > 0) then
           local_count = local_count + 1
           associate (x => op%subs(op%con%row_sub(i))%coords(:, op%con%row_node(i)))
             r = sqrt((x(1) - mesh%lengths(1)/2)**2 + (x(2) - mesh%lengths(2)/2)**2)

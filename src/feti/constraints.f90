@@ -13,6 +13,18 @@
 !> - contact, component z of a node of the face z = 0 under the obstacle's
 !>   footprint: one row on the copy in s_1, B = -e_z, c = g = z - psi(x, y)
 !>   (-u_z <= g, multiplier >= 0).
+!> Scaling (&solver scaling = 'young', the default): with w_c = E(s_c)/young the
+!> relative Young's modulus of the subdomain of copy c, the gluing row k becomes
+!> alpha_k (w_1, ..., w_k, -S_k, 0, ...), S_k = w_1 + ... + w_k,
+!> alpha_k = 1/sqrt(S_k (1 + S_k/w_(k+1))), and Dirichlet and contact rows are
+!> multiplied by sqrt(w) of their copy (c too). The rows span the same space as
+!> before (same constraints, same primal solution) and are orthonormal in the
+!> inner product weighted by diag(1/w): B diag(1/w) B^T = I per node, which makes
+!> the lumped approximation B diag(1/E) B^T of F scale-free across material
+!> jumps ("reorthogonalized rho-scaling"). A multiplier of a scaled row is
+!> lambda~ = lambda/s with s = `scale` of the row: the force is scale*lambda~.
+!> With equal moduli (variation 'none') every w_c = 1 and the rows are the
+!> unweighted ones bit for bit.
 !> Top Dirichlet takes precedence over symmetry on shared edges.
 !>
 !> Every row has a canonical 64-bit key (node, component, kind, index) that
@@ -31,6 +43,7 @@ module constraints
   use sorting, only: sort_unique
   use dual_exchange, only: dual_exchange_t
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Allreduce, MPI_Exscan, MPI_SUM
+  use materials, only: subdomain_material
   implicit none
   private
 
@@ -58,6 +71,7 @@ module constraints
     integer(i8), allocatable :: key(:)        !< (n_local) canonical keys
     integer(ip), allocatable :: kind(:)       !< (n_own) row_gluing | row_dirichlet | row_contact
     real(dp), allocatable :: c(:)             !< (n_own) right-hand side
+    real(dp), allocatable :: scale(:)         !< (n_own) force = scale * multiplier (1 unless &solver scaling)
     integer(ip), allocatable :: node(:)       !< (n_own) node gid
     integer(ip), allocatable :: row_sub(:)    !< (n_own) local subdomain index of the row's copy (s_1)
     integer(ip), allocatable :: row_node(:)   !< (n_own) local node number in that subdomain
@@ -70,7 +84,7 @@ module constraints
     integer(i8) :: key
     integer :: owner
     integer(ip) :: sub, dof, node, gid, kind, slot
-    real(dp) :: val, c
+    real(dp) :: val, c, scale
   end type record_t
 
 contains
@@ -162,13 +176,14 @@ contains
     con%n_local = con%n_own + n_ghost
 
     allocate (con%key(con%n_local), con%kind(con%n_own), con%c(con%n_own), con%node(con%n_own), &
-              con%row_sub(con%n_own), con%row_node(con%n_own))
+              con%row_sub(con%n_own), con%row_node(con%n_own), con%scale(con%n_own))
     do r = 1, nrows
       associate (first => rec(urow_first(r)))
         con%key(local_index(r)) = first%key
         if (local_index(r) <= con%n_own) then
           con%kind(local_index(r)) = first%kind
           con%c(local_index(r)) = first%c
+          con%scale(local_index(r)) = first%scale
           con%node(local_index(r)) = first%gid
         end if
       end associate
@@ -230,7 +245,7 @@ contains
       integer(ip) :: ls, a, gid, comp, m, j, k, ijk(3), s_id
       integer :: owner
       logical :: dirichlet(3), contact
-      real(dp) :: value(3), x(3), gap
+      real(dp) :: value(3), x(3), gap, w(8), sk, alpha
       filling = fill
       do ls = 1, size(subs, kind=ip)
         s_id = subs(ls)%id
@@ -243,37 +258,66 @@ contains
           if (m == 1 .and. .not. (any(dirichlet) .or. contact)) cycle
           j = findloc(copies(1:m), s_id, 1)
           owner = dec%subdomain_rank(copies(1))
+          call copy_weights(copies(1:m), w(1:m))
           do comp = 1, 3
             if (dirichlet(comp)) then
               call emit(row_key(gid, comp, row_dirichlet, j), int(me), ls, 3*(a - 1) + comp, a, gid, &
-                        row_dirichlet, j, 1.0_dp, value(comp))
-            else
+                        row_dirichlet, j, sqrt(w(j)), sqrt(w(j))*value(comp), sqrt(w(j)))
+            else if (all(w(1:m) == 1)) then
               do k = max(1, j - 1), m - 1
                 if (j <= k) then
                   call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, j, 1/sqrt(real(k*(k + 1), dp)), 0.0_dp)
+                            gid, row_gluing, j, 1/sqrt(real(k*(k + 1), dp)), 0.0_dp, 1.0_dp)
                 else
                   call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, j, -k/sqrt(real(k*(k + 1), dp)), 0.0_dp)
+                            gid, row_gluing, j, -k/sqrt(real(k*(k + 1), dp)), 0.0_dp, 1.0_dp)
+                end if
+              end do
+            else
+              ! weighted Helmert rows (see the module header)
+              do k = max(1, j - 1), m - 1
+                sk = sum(w(1:k))
+                alpha = 1/sqrt(sk*(1 + sk/w(k + 1)))
+                if (j <= k) then
+                  call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
+                            gid, row_gluing, j, alpha*w(j), 0.0_dp, 1.0_dp)
+                else
+                  call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
+                            gid, row_gluing, j, -alpha*sk, 0.0_dp, 1.0_dp)
                 end if
               end do
             end if
           end do
           if (contact .and. j == 1) then
             call emit(row_key(gid, 3_ip, row_contact, 1_ip), int(me), ls, 3*(a - 1) + 3, a, gid, &
-                      row_contact, j, -1.0_dp, gap)
+                      row_contact, j, -sqrt(w(1)), sqrt(w(1))*gap, sqrt(w(1)))
           end if
         end do
       end do
     end subroutine visit
 
-    subroutine emit(key, owner, ls, dof, node, gid, kind, slot, val, c)
+    !> w_c = E(s_c)/young for the copies' subdomains with &solver scaling =
+    !> 'young', else 1. From the parameters alone: the same on every rank.
+    subroutine copy_weights(ids, w)
+      integer(ip), intent(in) :: ids(:)
+      real(dp), intent(out) :: w(:)
+      integer(ip) :: c
+      real(dp) :: young, nu
+      w = 1
+      if (p%solver%scaling /= 'young') return
+      do c = 1, size(ids, kind=ip)
+        call subdomain_material(p, dec, ids(c), young, nu)
+        w(c) = young/p%material%young
+      end do
+    end subroutine copy_weights
+
+    subroutine emit(key, owner, ls, dof, node, gid, kind, slot, val, c, scale)
       integer(i8), intent(in) :: key
       integer, intent(in) :: owner
       integer(ip), intent(in) :: ls, dof, node, gid, kind, slot
-      real(dp), intent(in) :: val, c
+      real(dp), intent(in) :: val, c, scale
       nrec = nrec + 1
-      if (filling) rec(nrec) = record_t(key, owner, ls, dof, node, gid, kind, slot, val, c)
+      if (filling) rec(nrec) = record_t(key, owner, ls, dof, node, gid, kind, slot, val, c, scale)
     end subroutine emit
   end subroutine build_constraints
 

@@ -70,6 +70,7 @@ module params
     character(len=name_len) :: local_solver = 'block'    !< 'block' | 'subdomain'
     character(len=name_len) :: coarse_placement = 'redundant'  !< 'redundant' | 'distributed'
     real(dp) :: regularization = 1            !< rho_f relative to the mean diagonal of K
+    character(len=name_len) :: scaling = 'young'  !< rows of B weighted by Young's moduli: 'young' | 'none'
     logical :: monitor = .true.               !< one line per outer iteration
   end type solver_params_t
 
@@ -433,7 +434,7 @@ contains
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, &
                 regularization, active_tol, kkt_tol
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
-                               local_ordering, local_solver, coarse_placement, method
+                               local_ordering, local_solver, coarse_placement, method, scaling
     character(len=path_len) :: directory
     logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report
     namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping
@@ -443,7 +444,7 @@ contains
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
       m_scale, beta, eta_scale, power_iterations, coarse, coarse_placement, local_ordering, local_solver, &
-      regularization, monitor
+      regularization, scaling, monitor
     namelist /reconstruction/ method, active_tol, kkt_tol
     character(len=name_len) :: run_name
     namelist /output/ directory, run_name, write_hdf5, write_report
@@ -484,13 +485,13 @@ contains
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
         coarse_placement = s%coarse_placement
-        regularization = s%regularization; monitor = s%monitor
+        regularization = s%regularization; scaling = s%scaling; monitor = s%monitor
       end associate
       read (group_text, nml=solver, iostat=status, iomsg=msg)
       p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
                                  rho_scale, m_scale, beta, eta_scale, power_iterations, lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(coarse_placement), &
-                                 regularization, monitor)
+                                 regularization, lower(scaling), monitor)
     case ('reconstruction')
       method = p%reconstruction%method; active_tol = p%reconstruction%active_tol
       kkt_tol = p%reconstruction%kkt_tol
@@ -570,6 +571,8 @@ contains
         call fail('solver', 'local_solver', "must be 'block' or 'subdomain'", s%local_solver)
       if (s%regularization <= 0) &
         call fail('solver', 'regularization', 'must be > 0', reals([s%regularization]))
+      if (.not. one_of(s%scaling, [character(len=8) :: 'none', 'young'])) &
+        call fail('solver', 'scaling', "must be 'none' or 'young'", s%scaling)
     end associate
     associate (r => p%reconstruction)
       if (.not. one_of(r%method, [character(len=8) :: 'new', 'standard', 'both'])) &
@@ -624,7 +627,7 @@ contains
         "', coarse_placement = '"//trim(s%coarse_placement)// &
         "', local_ordering = '"//trim(s%local_ordering)//"', local_solver = '"//trim(s%local_solver)// &
         "', regularization = "// &
-        reals([s%regularization])//', monitor = '//logs(s%monitor)//' /'
+        reals([s%regularization])//", scaling = '"//trim(s%scaling)//"', monitor = "//logs(s%monitor)//' /'
     end associate
     write (unit, '(a)') "&reconstruction method = '"//trim(p%reconstruction%method)// &
       "', active_tol = "//reals([p%reconstruction%active_tol])//', kkt_tol = '// &
@@ -661,7 +664,8 @@ contains
       trim(p%solver%coarse)//'", "local_ordering": "'//trim(p%solver%local_ordering)// &
       '", "local_solver": "'//trim(p%solver%local_solver)// &
       '", "coarse_placement": "'//trim(p%solver%coarse_placement)// &
-      '", "regularization": '//jreals([p%solver%regularization])//', "monitor": '// &
+      '", "regularization": '//jreals([p%solver%regularization])//', "scaling": "'// &
+      trim(p%solver%scaling)//'", "monitor": '// &
       jlog(p%solver%monitor)//'}, '// &
       '"reconstruction": {"method": "'//trim(p%reconstruction%method)//'", "active_tol": '// &
       jreals([p%reconstruction%active_tol])//', "kkt_tol": '//jreals([p%reconstruction%kkt_tol])//'}, '// &

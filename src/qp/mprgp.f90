@@ -32,6 +32,17 @@
 !>   n_expansion_fallback). It costs one more Hessian multiplication than
 !>   'fixed' (two more on a fallback).
 !>
+!> The norm estimate ||A|| (a_norm) only has to bound the spectrum from above
+!> for 'fixed' to be safe, yet callers estimate it by a power method, which
+!> approaches ||A|| from below. Every CG, proportioning and optimal expansion
+!> direction d gives a Rayleigh quotient d^T A d / d^T d <= ||A|| for one more
+!> local dot product in a reduction that is made anyway; when it exceeds
+!> a_norm, a_norm is raised to it and alpha_bar = alpha_scale/a_norm follows
+!> (counted in n_norm_updates, kept across calls). It restores
+!> alpha_bar <= 2/||A|| when the caller's estimate is low; with the default
+!> power method (within 0.4% of ||A||) it never triggered in the hard cases
+!> (docs/RESULTS_draft_hard.md, "Hessian norm estimate").
+!>
 !> The stopping rule is an object (`mprgp_stop_t`) asked every iteration with
 !> the current x and ||g^P||, so that SMALBE can stop the inner loop on
 !> ||g^P|| <= min(M ||C x||, eta). The stand-alone `solve` stops on
@@ -47,7 +58,7 @@
 !>
 !> Communication per CG step: one MPI_Allreduce for the gradient split
 !> (||phi||^2, ||beta||^2, phit^T phi and phi^T A p fused), one for p^T A p
-!> with g^T p, one MIN for alpha_f, plus the Hessian. The sums are
+!> with g^T p and p^T p, one MIN for alpha_f, plus the Hessian. The sums are
 !> compensated (qp_problem: compensated_add, reduce_sums), so the iterates do
 !> not depend on the number of ranks when the Hessian's result does not.
 !>
@@ -107,6 +118,9 @@ module mprgp
     integer(ip) :: n_expansion = 0             !< expansion steps
     integer(ip) :: n_proportioning = 0         !< proportioning steps
     integer(ip) :: n_expansion_fallback = 0    !< 'optimal' expansions redone with alpha_bar
+    integer(ip) :: n_norm_updates = 0          !< times the last call raised a_norm to a Rayleigh quotient
+    real(dp) :: best_gp_norm = 0               !< smallest ||g^P|| of the last call
+    integer(ip) :: n_best = 0                  !< iteration of the last call at which it was reached
     real(dp), allocatable, private :: p(:), ap(:), w_phi(:), w_x(:), w_g(:)
   contains
     procedure :: init => mprgp_init
@@ -138,6 +152,7 @@ contains
     real(dp), intent(in), optional :: gamma, alpha_scale
     character(len=*), intent(in), optional :: expansion
     logical, intent(in), optional :: monitor
+    character(len=160) :: buf
 
     call self%free()
     self%a_norm = a_norm
@@ -152,7 +167,11 @@ contains
     self%monitor = .false.
     if (present(monitor)) self%monitor = monitor
 
-    if (.not. (a_norm > 0 .and. a_norm <= huge(a_norm))) call fatal_error('mprgp: ||A|| must be finite and > 0')
+    if (.not. (a_norm > 0 .and. a_norm <= huge(a_norm))) then
+      write (buf, '(a,es10.3,a)') 'mprgp: the Hessian norm estimate ||A|| = ', a_norm, ' must be finite and > 0 '// &
+        '(the operator over- or underflowed: data out of the range of double precision?)'
+      call fatal_error(trim(buf))
+    end if
     if (.not. (tol >= 0 .and. tol < 1)) call fatal_error('mprgp: tol must be in [0, 1)')
     if (max_hessian < 0) call fatal_error('mprgp: max_hessian must be >= 0')
     if (.not. (self%gamma > 0)) call fatal_error('mprgp: gamma must be > 0')
@@ -252,7 +271,7 @@ contains
     class(mprgp_stop_t), intent(inout) :: stop_rule
     integer(ip), intent(in) :: max_hessian
     logical, intent(in) :: gradient_given
-    real(dp) :: stats(4), pair(2), gp, alpha_f, alpha_cg, beta_cg, pap
+    real(dp) :: stats(4), pair(3), gp, alpha_f, alpha_cg, beta_cg, pap
     logical :: stop
     integer(ip) :: n
 
@@ -269,6 +288,9 @@ contains
     self%n_proportioning = 0
     self%n_expansion_fallback = 0
     self%gp_norm = huge(1.0_dp)
+    self%best_gp_norm = huge(1.0_dp)
+    self%n_best = 0
+    self%n_norm_updates = 0
     self%status = qp_status_not_run
     self%message = ''
 
@@ -290,6 +312,10 @@ contains
         call set_status(self, qp_status_not_finite, 'non-finite value in ||g^P||', self%n_iterations)
         exit
       end if
+      if (gp < self%best_gp_norm) then
+        self%best_gp_norm = gp
+        self%n_best = self%n_iterations
+      end if
       call stop_rule%test(problem, x, gp, stop)
       if (stop) then
         call set_status(self, qp_status_converged, 'converged (stopping rule met)', self%n_iterations)
@@ -304,7 +330,7 @@ contains
         ! proportional iterate: try a CG step along p
         alpha_f = feasible_step(problem, x, self%p)
         call apply_hessian(self, problem, self%p, self%ap)
-        call global_dots(problem, self%p, self%ap, g, self%p, pair)
+        call direction_dots(problem, self%p, self%ap, g, pair)
         pap = pair(1)
         if (.not. (ieee_is_finite(pap) .and. ieee_is_finite(pair(2)) .and. .not. ieee_is_nan(alpha_f))) then
           call set_status(self, qp_status_not_finite, 'non-finite value in p^T A p, g^T p or the feasible step', &
@@ -321,6 +347,7 @@ contains
           call set_status(self, qp_status_not_finite, 'non-finite CG step length', self%n_iterations)
           exit
         end if
+        call raise_norm(self, pap, pair(3))
 
         if (alpha_cg <= alpha_f) then
           ! CG step, then p <- phi - beta_cg p with beta_cg = phi^T A p / p^T A p
@@ -347,7 +374,7 @@ contains
         ! proportioning step along beta
         call chopped_gradient(problem, x, g, self%p)
         call apply_hessian(self, problem, self%p, self%ap)
-        call global_dots(problem, self%p, self%ap, g, self%p, pair)
+        call direction_dots(problem, self%p, self%ap, g, pair)
         pap = pair(1)
         if (.not. (ieee_is_finite(pap) .and. ieee_is_finite(pair(2)))) then
           call set_status(self, qp_status_not_finite, 'non-finite value in beta^T A beta or g^T beta', &
@@ -364,6 +391,7 @@ contains
           call set_status(self, qp_status_not_finite, 'non-finite proportioning step length', self%n_iterations)
           exit
         end if
+        call raise_norm(self, pap, pair(3))
         call take_step(problem, x, g, alpha_cg, self%p, self%ap)
         self%n_proportioning = self%n_proportioning + 1
         call free_gradient(problem, x, g, self%p)
@@ -383,7 +411,7 @@ contains
     real(dp), intent(in) :: b_lin(:)
     real(dp), intent(inout) :: x(:), g(:)
     integer(ip), intent(in) :: max_hessian
-    real(dp) :: s(3), hi(3), lo(3), alpha_e, f_half, f_new
+    real(dp) :: s(4), hi(4), lo(4), alpha_e, f_half, f_new
     integer(ip) :: n, budget
 
     n = problem%n
@@ -398,12 +426,14 @@ contains
       call add_dot(hi(1), lo(1), n, self%w_phi, g)
       call add_dot(hi(2), lo(2), n, self%w_phi, self%ap)
       call add_twice_cost(hi(3), lo(3), n, x, g, b_lin)
+      call add_dot(hi(4), lo(4), n, self%w_phi, self%w_phi)
       call problem%reduce_sums(hi, lo, s)
       if (.not. all(ieee_is_finite(s))) then
         call set_status(self, qp_status_not_finite, 'non-finite value in the optimal expansion step', &
                         self%n_iterations)
         return
       end if
+      call raise_norm(self, s(2), s(4))
       f_half = 0.5_dp*s(3)
       alpha_e = self%alpha_bar
       if (s(2) > 0) alpha_e = s(1)/s(2)
@@ -464,18 +494,38 @@ contains
     end do
   end subroutine add_dot
 
-  !> res = [u1^T v1, u2^T v2], global, in one reduction.
-  subroutine global_dots(problem, u1, v1, u2, v2, res)
+  !> res = [d^T (A d), g^T d, d^T d], global, in one reduction.
+  subroutine direction_dots(problem, d, ad, g, res)
     class(qp_problem_t), intent(in) :: problem
-    real(dp), intent(in) :: u1(:), v1(:), u2(:), v2(:)
-    real(dp), intent(out) :: res(2)
-    real(dp) :: hi(2), lo(2)
+    real(dp), intent(in) :: d(:), ad(:), g(:)
+    real(dp), intent(out) :: res(3)
+    real(dp) :: hi(3), lo(3)
     hi = 0
     lo = 0
-    call add_dot(hi(1), lo(1), problem%n, u1, v1)
-    call add_dot(hi(2), lo(2), problem%n, u2, v2)
+    call add_dot(hi(1), lo(1), problem%n, d, ad)
+    call add_dot(hi(2), lo(2), problem%n, g, d)
+    call add_dot(hi(3), lo(3), problem%n, d, d)
     call problem%reduce_sums(hi, lo, res)
-  end subroutine global_dots
+  end subroutine direction_dots
+
+  !> Every search direction d gives a Rayleigh quotient d^T A d / d^T d <= ||A||
+  !> for free. When one exceeds a_norm, the estimate from the caller (a power
+  !> method, which approaches ||A|| from below) was too small and the fixed
+  !> expansion step alpha_bar = alpha_scale/a_norm could exceed 2/||A||, where
+  !> the expansion no longer decreases the cost: raise a_norm to it. The
+  !> estimate only grows, and never beyond ||A||.
+  subroutine raise_norm(self, dad, dd)
+    class(mprgp_t), intent(inout) :: self
+    real(dp), intent(in) :: dad, dd
+    real(dp) :: quotient
+    if (.not. (dd > 0 .and. dad > 0)) return
+    quotient = dad/dd
+    if (ieee_is_finite(quotient) .and. quotient > self%a_norm) then
+      self%a_norm = quotient
+      self%alpha_bar = self%alpha_scale/self%a_norm
+      self%n_norm_updates = self%n_norm_updates + 1
+    end if
+  end subroutine raise_norm
 
   !> y = A v, counted.
   subroutine apply_hessian(self, problem, v, y)
@@ -623,8 +673,9 @@ contains
     case (qp_status_converged)
       write (buf, '(a,a,i0,a)') what, ' after ', number, ' iterations'
     case (qp_status_max_hessian)
-      write (buf, '(3a,i0,a,es10.3)') 'not converged: ', what, ' (max_hessian = ', number, '), ||g^P|| = ', &
-        self%gp_norm
+      write (buf, '(3a,i0,a,es10.3,a,es10.3,a,i0,a,i0)') 'not converged: ', what, ' (max_hessian = ', number, &
+        '), ||g^P|| = ', self%gp_norm, ', smallest ', self%best_gp_norm, ' at iteration ', self%n_best, ' of ', &
+        self%n_iterations
     case default
       write (buf, '(3a,i0)') 'not converged: ', what, ' at iteration ', number
     end select
@@ -641,6 +692,11 @@ contains
       ', expansion fallbacks ', self%n_expansion_fallback, '), Hessian multiplications ', self%n_hessian, &
       ', ||g^P|| = ', self%gp_norm
     call log_message(buf)
+    if (self%n_norm_updates > 0) then
+      write (buf, '(a,es10.3,a,i0,a)') '  ||A|| estimate raised to ', self%a_norm, ' by Rayleigh quotients (', &
+        self%n_norm_updates, ' times)'
+      call log_message(buf)
+    end if
   end subroutine mprgp_summary
 
   !> Allocate v with length n unless it already has it (no work inside loops).

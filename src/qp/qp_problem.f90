@@ -46,7 +46,7 @@ module qp_problem
 
   real(dp), parameter, public :: no_lower_bound = -huge(1.0_dp)  !< l_i of an unbounded x_i
 
-  integer, parameter, public :: qp_message_len = 256
+  integer, parameter, public :: qp_message_len = 512
   integer, parameter, public :: max_reduce_sums = 8   !< most sums reduce_sums combines at once
 
   ! the double-double reduction, created on first use (MPI_Finalize frees it)

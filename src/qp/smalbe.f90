@@ -111,6 +111,7 @@ module smalbe
     integer(ip) :: n_expansion_fallback = 0    !< 'optimal' expansions redone with alpha_bar
     integer(ip) :: n_eq_residual = 0           !< eq_residual calls (FETI: coarse solves for ||C x||)
     integer(ip) :: n_m_updates = 0             !< times M was reduced
+    integer(ip) :: n_norm_updates = 0          !< times the inner MPRGP raised its ||A|| estimate
     integer(ip) :: n_active = 0                !< components at their bound at the returned x
     real(dp), allocatable, private :: b_lin(:), ct_mu(:), ct_new(:), x_prev(:), g_prev(:)
     type(smalbe_inner_stop_t), private :: rule
@@ -303,6 +304,7 @@ contains
       self%n_expansion = self%n_expansion + self%inner%n_expansion
       self%n_proportioning = self%n_proportioning + self%inner%n_proportioning
       self%n_expansion_fallback = self%n_expansion_fallback + self%inner%n_expansion_fallback
+      self%n_norm_updates = self%n_norm_updates + self%inner%n_norm_updates
       self%gp_norm = self%inner%gp_norm
       if (self%inner%status /= qp_status_converged .and. self%inner%status /= qp_status_max_hessian) then
         self%status = self%inner%status
@@ -346,16 +348,15 @@ contains
       end if
       if (self%inner%status == qp_status_max_hessian) then
         write (buf, '(a,i0,a,i0,a)') 'not converged: Hessian multiplication cap max_hessian = ', &
-          self%max_hessian, ' reached in outer iteration ', outer, ' (tol not met)'
+          self%max_hessian, ' reached in outer iteration ', outer, '; '
         self%status = qp_status_max_hessian
-        self%message = buf
+        self%message = trim(buf)//' '//distance_to_tol(self)//stagnation_note(self)
         exit
       end if
       if (outer == self%max_outer) then
-        write (buf, '(a,i0,a)') 'not converged: outer iteration cap max_outer = ', self%max_outer, &
-          ' reached (tol not met)'
+        write (buf, '(a,i0,a)') 'not converged: outer iteration cap max_outer = ', self%max_outer, ' reached; '
         self%status = qp_status_max_outer
-        self%message = buf
+        self%message = trim(buf)//' '//distance_to_tol(self)
         exit
       end if
 
@@ -387,6 +388,32 @@ contains
     if (self%monitor) call monitor_summary(self)
   end subroutine smalbe_solve
 
+  !> 'tol not met: ||g^P|| = .., ||C x|| = .. (both must be <= tol ||b|| = ..)'.
+  function distance_to_tol(self) result(text)
+    class(smalbe_t), intent(in) :: self
+    character(len=:), allocatable :: text
+    character(len=120) :: buf
+    write (buf, '(a,es9.2,a,es9.2,a,es9.2,a)') 'tol not met: ||g^P|| = ', self%gp_norm, ', ||C x|| = ', &
+      self%cnorm, ' (both must be <= tol ||b|| = ', self%tol_abs, ')'
+    text = trim(buf)
+  end function distance_to_tol
+
+  !> When the last inner solve ran long without improving its smallest ||g^P||
+  !> in its second half, say so: more Hessian multiplications are unlikely to
+  !> help (ill-conditioned dual, or contact rows with lambda ~ 0 and gap ~ 0).
+  function stagnation_note(self) result(text)
+    class(smalbe_t), intent(in) :: self
+    character(len=:), allocatable :: text
+    character(len=200) :: buf
+    text = ''
+    if (self%inner%n_iterations >= 100 .and. 2*self%inner%n_best < self%inner%n_iterations) then
+      write (buf, '(a,i0,a,es9.2,a,i0,a)') '; the last inner MPRGP solve stagnated (', self%inner%n_iterations, &
+        ' iterations, smallest ||g^P|| ', self%inner%best_gp_norm, ' at iteration ', self%inner%n_best, &
+        '): ill-conditioned or degenerate dual problem'
+      text = trim(buf)
+    end if
+  end function stagnation_note
+
   subroutine reset_counters(self)
     class(smalbe_t), intent(inout) :: self
     self%status = qp_status_not_run
@@ -403,6 +430,7 @@ contains
     self%n_expansion_fallback = 0
     self%n_eq_residual = 0
     self%n_m_updates = 0
+    self%n_norm_updates = 0
     self%n_active = 0
   end subroutine reset_counters
 
@@ -443,6 +471,11 @@ contains
       ', ||Cx|| evaluations ', self%n_eq_residual, ', M updates ', self%n_m_updates, ', final M ', &
       self%m_bound, ', active ', self%n_active
     call log_message(buf)
+    if (self%n_norm_updates > 0) then
+      write (buf, '(a,es10.3,a,es10.3,a,i0,a)') '  ||A|| estimate raised from ', self%a_norm, ' to ', &
+        self%inner%a_norm, ' by Rayleigh quotients of the search directions (', self%n_norm_updates, ' times)'
+      call log_message(buf)
+    end if
   end subroutine monitor_summary
 
   !> Allocate v with length n unless it already has it.

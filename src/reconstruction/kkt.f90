@@ -1,7 +1,7 @@
 !> The KKT conditions of the primal contact problem (CASES.md), checked on the
 !> reconstructed displacements u and the multipliers lambda; each residual is
 !> relative to the size of the terms it is made of:
-!> - equilibrium:      ||K u - f + B^T lambda|| / max(||K u||, ||f||, ||B^T lambda||)
+!> - equilibrium:      ||K u - f + B^T lambda|| / max(||K u||, ||f||, ||B^T lambda||, || |K| |u| ||)
 !> - equality:         ||B_E u - c_E|| / max(||c_E||, || |B_E| |u| ||, u_rms sqrt(n_E))
 !> - feasibility:      ||max(B_I u - c_I, 0)|| / max(||c_I||, || |B_I| |u| ||, u_rms sqrt(n_I))
 !> - dual_feasibility: ||min(lambda_I, 0)|| / ||lambda_I||
@@ -9,10 +9,14 @@
 !> where u_rms is the root mean square of all displacement components: a row
 !> whose terms are all ~0 (a node in contact that does not move, with a zero
 !> gap) is measured against the typical size of the displacements, not 0.
+!> Likewise || |K| |u| || (|K| the entrywise absolute value) is the size of the
+!> terms of K u: without it a stress-free solution (a rigid motion with
+!> lambda = 0, e.g. no contact) compares round-off with round-off.
 !> Norms are over all subdomains and rows of all ranks; 0/0 counts as 0.
 module kkt
   use kinds, only: dp, ip, MPI_REAL_DP
   use feti_operators, only: feti_t, local_field_t
+  use subdomain, only: subdomain_t
   use mpi_f08, only: MPI_Allreduce, MPI_SUM
   implicit none
   private
@@ -42,7 +46,7 @@ contains
     type(kkt_residuals_t) :: res
     type(local_field_t), allocatable :: btl(:), absu(:)
     real(dp), allocatable :: ku(:), bu(:), babs(:), r(:)
-    real(dp) :: s(16), u_rms2, n_equality, scale_i
+    real(dp) :: s(17), u_rms2, n_equality, scale_i
     integer(ip) :: ls, n
     integer :: ierr
 
@@ -58,6 +62,7 @@ contains
         s(2) = s(2) + sum(ku**2)
         s(3) = s(3) + sum(sub%f**2)
         s(4) = s(4) + sum(btl(ls)%v**2)
+        s(17) = s(17) + abs_k_abs_u_squared(sub, u(ls)%v)
         deallocate (ku)
         absu(ls)%v = abs(u(ls)%v)
         s(14) = s(14) + sum(u(ls)%v**2)
@@ -80,7 +85,7 @@ contains
       s(16) = count(contact)
     end associate
     call sum_all(op, s)
-    res%equilibrium = ratio(sqrt(s(1)), sqrt(max(s(2), s(3), s(4))))
+    res%equilibrium = ratio(sqrt(s(1)), sqrt(max(s(2), s(3), s(4), s(17))))
     u_rms2 = s(14)/max(s(15), 1.0_dp)
     n_equality = real(op%con%n_global, dp) - s(16)
     res%equality = ratio(sqrt(s(5)), sqrt(max(s(6), s(7), u_rms2*n_equality)))
@@ -89,6 +94,22 @@ contains
     res%dual_feasibility = ratio(sqrt(s(11)), sqrt(s(12)))
     res%complementarity = ratio(s(13), sqrt(s(12))*scale_i)
   end function check_kkt
+
+  !> || |K| |u| ||^2 over the rows of one subdomain.
+  real(dp) function abs_k_abs_u_squared(sub, u) result(total)
+    type(subdomain_t), intent(in) :: sub
+    real(dp), intent(in) :: u(:)
+    integer(ip) :: i, k
+    real(dp) :: t
+    total = 0
+    do i = 1, sub%ndof
+      t = 0
+      do k = sub%K%rowptr(i), sub%K%rowptr(i + 1) - 1
+        t = t + abs(sub%K%values(k))*abs(u(sub%K%colind(k)))
+      end do
+      total = total + t**2
+    end do
+  end function abs_k_abs_u_squared
 
   pure real(dp) function ratio(a, b)
     real(dp), intent(in) :: a, b

@@ -97,10 +97,10 @@ contains
     integer(ip) :: local
     integer :: ierr
     mine = 0
-    if (any(op%is_contact)) mine = maxval(lambda, mask=op%is_contact)
+    if (any(op%is_contact)) mine = maxval(op%con%scale*lambda, mask=op%is_contact)
     call MPI_Allreduce(mine, biggest, 1, MPI_REAL_DP, MPI_MAX, op%comm, ierr)
     threshold = active_tol*max(biggest, 0.0_dp)
-    mask = (.not. op%is_contact) .or. (lambda > threshold .and. lambda > 0)
+    mask = (.not. op%is_contact) .or. (op%con%scale*lambda > threshold .and. lambda > 0)
     local = count(op%is_contact .and. mask, kind=ip)
     call MPI_Allreduce(local, nactive_contact, 1, MPI_INT_IP, MPI_SUM, op%comm, ierr)
   end subroutine active_contact_mask

@@ -119,6 +119,9 @@ contains
     call assert_true(.not. solver%converged(), 'cap: not converged', HERE)
     call assert_true(solver%n_hessian <= 3, 'cap: at most 3 Hessian multiplications', HERE)
     call assert_true(index(solver%message, 'max_hessian = 3') > 0, 'cap: message names the cap', HERE)
+    call assert_true(index(solver%message, 'smallest') > 0, 'cap: message gives the smallest ||g^P||', HERE)
+    call assert_true(solver%best_gp_norm <= solver%gp_norm .and. solver%n_best <= solver%n_iterations, &
+                     'cap: smallest ||g^P|| and its iteration are consistent', HERE)
     call assert_true(all(x >= dist%lower), 'cap: iterate feasible', HERE)
     call solver%free()
   end subroutine check_cap

@@ -142,6 +142,8 @@ contains
     call assert_true(.not. solver%converged(), 'cap max_hessian: not converged', HERE)
     call assert_true(solver%n_hessian <= 3 .and. dist%n_hessian_calls <= 3, 'cap max_hessian: <= 3 products', HERE)
     call assert_true(index(solver%message, 'max_hessian = 3') > 0, 'cap max_hessian: message', HERE)
+    call assert_true(index(solver%message, 'tol not met') > 0 .and. index(solver%message, 'tol ||b||') > 0, &
+                     'cap max_hessian: message says how far from tol', HERE)
 
     call solver%init(cs%a_norm, 1.0e-10_dp, 1_ip, 20000_ip)
     x = 0
@@ -149,6 +151,7 @@ contains
     call assert_equal(qp_status_max_outer, solver%status, 'cap max_outer: status', HERE)
     call assert_equal(1_ip, solver%n_outer, 'cap max_outer: one outer iteration', HERE)
     call assert_true(index(solver%message, 'max_outer = 1') > 0, 'cap max_outer: message', HERE)
+    call assert_true(index(solver%message, 'tol not met') > 0, 'cap max_outer: message says how far from tol', HERE)
     call solver%free()
   end subroutine check_caps
 
