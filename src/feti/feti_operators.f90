@@ -228,15 +228,19 @@ contains
     call timer_stop('coarse solve')
   end subroutine coarse_solve
 
-  !> y = P x = x - G^T (G G^T)^{-1} G x (y may not be x).
-  subroutine project(this, x, y)
+  !> y = P x = x - G^T (G G^T)^{-1} G x (y may not be x); optionally also
+  !> G x and (G G^T)^{-1} G x, which the dual problem keeps (see dual_problem).
+  subroutine project(this, x, y, gx, zx)
     class(feti_t), intent(inout) :: this
     real(dp), intent(in) :: x(:)
     real(dp), intent(inout) :: y(:)
+    real(dp), intent(out), optional :: gx(:), zx(:)   !< G x and (G G^T)^{-1} G x on the way
     call this%apply_g(x, this%cwork)
     call this%coarse_solve(this%cwork, this%cwork2)
     call this%apply_gt(this%cwork2, y)
     y = x - y
+    if (present(gx)) gx = this%cwork
+    if (present(zx)) zx = this%cwork2
   end subroutine project
 
   !> Global dot product of dual vectors.

@@ -29,6 +29,12 @@ module dual_problem
     real(dp) :: rho = 0                       !< penalty (regularization) of Eq. (8), unscaled
     real(dp) :: scale = 1                     !< s = ||P F P||: the QP is Eq. (8) divided by s
     real(dp), allocatable, private :: px(:), fpx(:), pfpx(:), gz(:), cz(:)
+    !> G v and (G G^T)^{-1} G v of the last Hessian argument v (from its
+    !> projection), and the same for the iterate x while the solver keeps them
+    !> up to date (track_*): then eq_residual costs no coarse solve.
+    real(dp), allocatable, private :: last_g(:), last_z(:), x_g(:), x_z(:)
+    logical, private :: last_valid = .false., x_valid = .false.
+    integer(ip) :: tracked_residuals = 0       !< eq_residual calls answered from the tracking
   contains
     procedure :: init
     procedure :: hessian
@@ -36,6 +42,9 @@ module dual_problem
     procedure :: eq_size
     procedure :: eq_residual
     procedure :: eq_apply_t
+    procedure :: track_last
+    procedure :: track_step
+    procedure :: track_reset
     procedure :: unscaled_multiplier
     procedure :: free
   end type dual_problem_t
@@ -57,6 +66,10 @@ contains
     if (.not. this%rho > 0) call fatal_error('dual_problem: ||P F P|| estimate is not positive')
     this%scale = op%norm_pfp
     allocate (this%px(n), this%fpx(n), this%pfpx(n), this%gz(6*op%nlocal), this%cz(6*op%nlocal))
+    allocate (this%last_g(6*op%nlocal), this%last_z(6*op%nlocal), this%x_g(6*op%nlocal), this%x_z(6*op%nlocal))
+    this%last_valid = .false.
+    this%x_valid = .false.
+    this%tracked_residuals = 0
     ! b = P (d - F lambda~)
     call op%apply_f(op%lambda_tilde, this%fpx)
     this%fpx = op%d - this%fpx
@@ -70,13 +83,42 @@ contains
     class(dual_problem_t), intent(inout) :: self
     real(dp), intent(in) :: x(:)
     real(dp), intent(out) :: y(:)
-    call self%op%project(x, self%px)
+    call self%op%project(x, self%px, self%last_g, self%last_z)
+    self%last_valid = .true.
     call self%op%apply_f(self%px, self%fpx)
     call self%op%project(self%fpx, self%pfpx)
     y = (self%pfpx + self%rho*(x - self%px))/self%scale
   end subroutine hessian
 
   !> The penalty of the scaled QP: rho/s.
+  !> x is now the argument of the last Hessian product.
+  subroutine track_last(self)
+    class(dual_problem_t), intent(inout) :: self
+    self%x_valid = self%last_valid
+    if (self%x_valid) then
+      self%x_g = self%last_g
+      self%x_z = self%last_z
+    end if
+  end subroutine track_last
+
+  !> x moved to x - alpha v, v the argument of the last Hessian product.
+  subroutine track_step(self, alpha)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: alpha
+    if (.not. (self%x_valid .and. self%last_valid)) then
+      self%x_valid = .false.
+      return
+    end if
+    self%x_g = self%x_g - alpha*self%last_g
+    self%x_z = self%x_z - alpha*self%last_z
+  end subroutine track_step
+
+  !> x changed in a way the tracking cannot follow.
+  subroutine track_reset(self)
+    class(dual_problem_t), intent(inout) :: self
+    self%x_valid = .false.
+  end subroutine track_reset
+
   real(dp) function penalty(self)
     class(dual_problem_t), intent(in) :: self
     penalty = self%rho/self%scale
@@ -96,7 +138,8 @@ contains
     eq_size = 6*self%op%nlocal
   end function eq_size
 
-  !> z = (G G^T)^{-1} G x and cnorm = ||G~ x|| = sqrt((G x)^T z).
+  !> z = (G G^T)^{-1} G x and cnorm = ||G~ x|| = sqrt((G x)^T z); from the
+  !> tracked values when the solver kept them up to date, else one coarse solve.
   subroutine eq_residual(self, x, z, cnorm)
     class(dual_problem_t), intent(inout) :: self
     real(dp), intent(in) :: x(:)
@@ -104,9 +147,15 @@ contains
     real(dp), intent(out) :: cnorm
     real(dp) :: mine, total
     integer :: ierr
-    call self%op%apply_g(x, self%gz)
-    call self%op%coarse_solve(self%gz, z)
-    mine = dot_product(self%gz, z)
+    if (self%x_valid) then
+      self%tracked_residuals = self%tracked_residuals + 1
+    else
+      call self%op%apply_g(x, self%x_g)
+      call self%op%coarse_solve(self%x_g, self%x_z)
+      self%x_valid = .true.
+    end if
+    z = self%x_z
+    mine = dot_product(self%x_g, self%x_z)
     call MPI_Allreduce(mine, total, 1, MPI_REAL_DP, MPI_SUM, self%comm, ierr)
     cnorm = sqrt(max(total, 0.0_dp))
   end subroutine eq_residual
@@ -123,6 +172,7 @@ contains
     class(dual_problem_t), intent(inout) :: this
     call this%free_base()
     if (allocated(this%px)) deallocate (this%px, this%fpx, this%pfpx, this%gz, this%cz)
+    if (allocated(this%last_g)) deallocate (this%last_g, this%last_z, this%x_g, this%x_z)
     this%op => null()
   end subroutine free
 end module dual_problem

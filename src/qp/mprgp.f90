@@ -295,11 +295,13 @@ contains
     self%message = ''
 
     if (.not. gradient_given) then
+      call problem%track_reset()
       if (max_hessian < 1) then
         call set_status(self, qp_status_max_hessian, 'Hessian multiplication cap reached', max_hessian)
         return
       end if
       call apply_hessian(self, problem, x, g)
+      call problem%track_last()
       g(1:n) = g(1:n) - b_lin(1:n)
     end if
     call free_gradient(problem, x, g, self%p)
@@ -352,6 +354,7 @@ contains
         if (alpha_cg <= alpha_f) then
           ! CG step, then p <- phi - beta_cg p with beta_cg = phi^T A p / p^T A p
           call take_step(problem, x, g, alpha_cg, self%p, self%ap)
+          call problem%track_step(alpha_cg)
           call split_stats(self, problem, x, g, stats, self%ap)
           beta_cg = stats(4)/pap
           if (.not. ieee_is_finite(beta_cg)) then
@@ -364,6 +367,7 @@ contains
         else
           ! expansion step: half step to the boundary, then the projected gradient step
           call take_step(problem, x, g, alpha_f, self%p, self%ap)
+          call problem%track_step(alpha_f)
           self%n_expansion = self%n_expansion + 1
           call expand(self, problem, b_lin, x, g, max_hessian)
           if (self%status /= qp_status_not_run) exit
@@ -393,6 +397,7 @@ contains
         end if
         call raise_norm(self, pap, pair(3))
         call take_step(problem, x, g, alpha_cg, self%p, self%ap)
+        call problem%track_step(alpha_cg)
         self%n_proportioning = self%n_proportioning + 1
         call free_gradient(problem, x, g, self%p)
         call split_stats(self, problem, x, g, stats)
@@ -446,6 +451,7 @@ contains
       self%w_g(1:n) = g(1:n)
       call projected_step(problem, self%w_x, alpha_e, self%w_phi, x)
       call apply_hessian(self, problem, x, g)
+      call problem%track_last()
       g(1:n) = g(1:n) - b_lin(1:n)
       hi = 0
       lo = 0
@@ -458,16 +464,19 @@ contains
         if (max_hessian - self%n_hessian >= 1) then
           call projected_step(problem, self%w_x, self%alpha_bar, self%w_phi, x)
           call apply_hessian(self, problem, x, g)
+          call problem%track_last()
           g(1:n) = g(1:n) - b_lin(1:n)
         else
           x(1:n) = self%w_x(1:n)
           g(1:n) = self%w_g(1:n)
+          call problem%track_reset()
         end if
       end if
     else
       self%w_x(1:n) = x(1:n)
       call projected_step(problem, self%w_x, self%alpha_bar, self%w_phi, x)
       call apply_hessian(self, problem, x, g)
+      call problem%track_last()
       g(1:n) = g(1:n) - b_lin(1:n)
     end if
   end subroutine expand

@@ -78,6 +78,9 @@ module qp_problem
     procedure :: eq_size => default_eq_size
     procedure :: eq_residual => default_eq_residual
     procedure :: eq_apply_t => default_eq_apply_t
+    procedure :: track_last => default_track
+    procedure :: track_step => default_track_step
+    procedure :: track_reset => default_track
     procedure :: init_base
     procedure :: free_base
     procedure :: dot
@@ -197,6 +200,21 @@ contains
     call fatal_error('qp_problem: eq_apply_t not provided by this problem ('//trim(sizes)//')')
     y = 0
   end subroutine default_eq_apply_t
+
+  !> Optional bookkeeping of C x that a problem may keep so that eq_residual
+  !> needs no new work: the solver calls track_last when x has become the
+  !> argument v of the last `hessian` call, track_step(alpha) when x moved to
+  !> x - alpha v, and track_reset when x changed otherwise. No-ops by default.
+  subroutine default_track(self)
+    class(qp_problem_t), intent(inout) :: self
+    if (.false.) self%n = self%n
+  end subroutine default_track
+
+  subroutine default_track_step(self, alpha)
+    class(qp_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: alpha
+    if (.false.) self%n = self%n + int(alpha)
+  end subroutine default_track_step
 
   !> Global x^T y (compensated, independent of the distribution).
   real(dp) function dot(self, x, y)
