@@ -534,7 +534,8 @@ contains
         call fail('material', 'poisson', 'must be in (-1, 0.5)', reals([m%poisson]))
       if (.not. one_of(m%variation, [character(len=12) :: 'none', 'checkerboard', 'random'])) &
         call fail('material', 'variation', "must be 'none', 'checkerboard' or 'random'", m%variation)
-      if (m%contrast < 1) call fail('material', 'contrast', 'must be >= 1', reals([m%contrast]))
+      if (m%contrast < 1 .or. m%contrast > 1.0e12_dp) &
+        call fail('material', 'contrast', 'must be in [1, 1e12]', reals([m%contrast]))
     end associate
     associate (b => p%boundary)
       if (.not. (b%top_dirichlet .or. b%symmetry_x0 .or. b%symmetry_y0 .or. p%obstacle%shape /= 'none')) &
@@ -641,35 +642,35 @@ contains
   function params_json(p) result(json)
     type(params_t), intent(in) :: p
     character(len=:), allocatable :: json
-    json = '{"file": "'//trim(p%file)//'", ' // &
+    json = '{"file": "'//jstr(p%file)//'", ' // &
       '"mesh": {"nsub": ['//jints(p%mesh%nsub)//'], "nel": ['//jints(p%mesh%nel)// &
       '], "lengths": ['//jreals(p%mesh%lengths)//'], "distortion": '//jreals([p%mesh%distortion])// &
       ', "distortion_seed": '//jints([p%mesh%distortion_seed])//', "decomposition": "'// &
-      trim(p%mesh%decomposition)//'", "mapping": "'//trim(p%mesh%mapping)//'"}, '// &
+      jstr(p%mesh%decomposition)//'", "mapping": "'//jstr(p%mesh%mapping)//'"}, '// &
       '"material": {"young": '//jreals([p%material%young])//', "poisson": '// &
-      jreals([p%material%poisson])//', "variation": "'//trim(p%material%variation)// &
+      jreals([p%material%poisson])//', "variation": "'//jstr(p%material%variation)// &
       '", "contrast": '//jreals([p%material%contrast])//', "seed": '//jints([p%material%seed])//'}, '// &
       '"load": {"top_pressure": '//jreals([p%load%top_pressure])//'}, '// &
       '"boundary": {"top_dirichlet": '//jlog(p%boundary%top_dirichlet)//', "top_displacement": ['// &
       jreals(p%boundary%top_displacement)//'], "symmetry_x0": '//jlog(p%boundary%symmetry_x0)// &
       ', "symmetry_y0": '//jlog(p%boundary%symmetry_y0)//'}, '// &
-      '"obstacle": {"shape": "'//trim(p%obstacle%shape)//'", "radius": '//jreals([p%obstacle%radius])// &
+      '"obstacle": {"shape": "'//jstr(p%obstacle%shape)//'", "radius": '//jreals([p%obstacle%radius])// &
       ', "gap": '//jreals([p%obstacle%gap])//'}, '// &
       '"solver": {"tol": '//jreals([p%solver%tol])//', "max_outer": '//jints([p%solver%max_outer])// &
       ', "max_hessian": '//jints([p%solver%max_hessian])//', "gamma": '//jreals([p%solver%gamma])// &
-      ', "alpha_scale": '//jreals([p%solver%alpha_scale])//', "expansion": "'//trim(p%solver%expansion)// &
+      ', "alpha_scale": '//jreals([p%solver%alpha_scale])//', "expansion": "'//jstr(p%solver%expansion)// &
       '", "rho_scale": '//jreals([p%solver%rho_scale])//', "m_scale": '//jreals([p%solver%m_scale])// &
       ', "beta": '//jreals([p%solver%beta])//', "eta_scale": '//jreals([p%solver%eta_scale])// &
       ', "power_iterations": '//jints([p%solver%power_iterations])//', "coarse": "'// &
-      trim(p%solver%coarse)//'", "local_ordering": "'//trim(p%solver%local_ordering)// &
-      '", "local_solver": "'//trim(p%solver%local_solver)// &
-      '", "coarse_placement": "'//trim(p%solver%coarse_placement)// &
+      jstr(p%solver%coarse)//'", "local_ordering": "'//jstr(p%solver%local_ordering)// &
+      '", "local_solver": "'//jstr(p%solver%local_solver)// &
+      '", "coarse_placement": "'//jstr(p%solver%coarse_placement)// &
       '", "regularization": '//jreals([p%solver%regularization])//', "scaling": "'// &
-      trim(p%solver%scaling)//'", "monitor": '// &
+      jstr(p%solver%scaling)//'", "monitor": '// &
       jlog(p%solver%monitor)//'}, '// &
-      '"reconstruction": {"method": "'//trim(p%reconstruction%method)//'", "active_tol": '// &
+      '"reconstruction": {"method": "'//jstr(p%reconstruction%method)//'", "active_tol": '// &
       jreals([p%reconstruction%active_tol])//', "kkt_tol": '//jreals([p%reconstruction%kkt_tol])//'}, '// &
-      '"output": {"directory": "'//trim(p%output%directory)//'", "run_name": "'//trim(p%output%run_name)// &
+      '"output": {"directory": "'//jstr(p%output%directory)//'", "run_name": "'//jstr(p%output%run_name)// &
       '", "write_hdf5": '//jlog(p%output%write_hdf5)//', "write_report": '// &
       jlog(p%output%write_report)//'}}'
   end function params_json
@@ -772,6 +773,22 @@ contains
       if (k < size(v)) s = s//', '
     end do
   end function jreals
+
+  !> A string for JSON: trimmed, with '\' and '"' escaped and control characters dropped.
+  function jstr(v) result(s)
+    character(len=*), intent(in) :: v
+    character(len=:), allocatable :: s
+    integer :: i
+    s = ''
+    do i = 1, len_trim(v)
+      select case (v(i:i))
+      case ('"', '\')
+        s = s//'\'//v(i:i)
+      case default
+        if (iachar(v(i:i)) >= 32) s = s//v(i:i)
+      end select
+    end do
+  end function jstr
 
   function jlog(v) result(s)
     logical, intent(in) :: v

@@ -63,7 +63,10 @@ contains
     call this%init_base(op%comm, n)
     this%has_equality = .true.
     this%rho = rho_scale*op%norm_pfp
-    if (.not. this%rho > 0) call fatal_error('dual_problem: ||P F P|| estimate is not positive')
+    if (.not. (op%norm_pfp > 0 .and. op%norm_pfp < huge(1.0_dp))) &
+      call fatal_error('the norm of the dual operator P F P is not a positive finite number; '// &
+                       '&material young (or &mesh lengths) is probably outside what double precision can handle')
+    if (.not. this%rho > 0) call fatal_error('dual_problem: &solver rho_scale gives no positive penalty')
     this%scale = op%norm_pfp
     allocate (this%px(n), this%fpx(n), this%pfpx(n), this%gz(6*op%nlocal), this%cz(6*op%nlocal))
     allocate (this%last_g(6*op%nlocal), this%last_z(6*op%nlocal), this%x_g(6*op%nlocal), this%x_z(6*op%nlocal))

@@ -197,6 +197,10 @@ def main():
     if args.expect_message:
         check(re.search(args.expect_message, out) is not None, "output matches %r" % args.expect_message)
     outdir = os.path.join(args.workdir, "out")
+    for g, items in groups.items():
+        for name, value in items:
+            if g == "output" and name == "directory":
+                outdir = value.strip().strip("'")
     for c in args.check:
         kind, *rest = c.split(":")
         if kind == "block_exact":
