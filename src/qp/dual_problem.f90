@@ -28,7 +28,7 @@ module dual_problem
     type(feti_t), pointer :: op => null()
     real(dp) :: rho = 0                       !< penalty (regularization) of Eq. (8), unscaled
     real(dp) :: scale = 1                     !< s = ||P F P||: the QP is Eq. (8) divided by s
-    real(dp), allocatable, private :: px(:), fpx(:), pfpx(:), gz(:), cz(:)
+    real(dp), allocatable, private :: px(:), fpx(:), pfpx(:)
     !> G v and (G G^T)^{-1} G v of the last Hessian argument v (from its
     !> projection), and the same for the iterate x while the solver keeps them
     !> up to date (track_*): then eq_residual costs no coarse solve.
@@ -37,6 +37,8 @@ module dual_problem
     integer(ip) :: tracked_residuals = 0       !< eq_residual calls answered from the tracking
   contains
     procedure :: init
+    procedure :: prepare
+    procedure :: apply_projector
     procedure :: hessian
     procedure :: penalty
     procedure :: eq_size
@@ -68,15 +70,16 @@ contains
                        '&material young (or &mesh lengths) is probably outside what double precision can handle')
     if (.not. this%rho > 0) call fatal_error('dual_problem: &solver rho_scale gives no positive penalty')
     this%scale = op%norm_pfp
-    allocate (this%px(n), this%fpx(n), this%pfpx(n), this%gz(6*op%nlocal), this%cz(6*op%nlocal))
+    allocate (this%px(n), this%fpx(n), this%pfpx(n))
     allocate (this%last_g(6*op%nlocal), this%last_z(6*op%nlocal), this%x_g(6*op%nlocal), this%x_z(6*op%nlocal))
     this%last_valid = .false.
     this%x_valid = .false.
     this%tracked_residuals = 0
+    call this%prepare()
     ! b = P (d - F lambda~)
     call op%apply_f(op%lambda_tilde, this%fpx)
     this%fpx = op%d - this%fpx
-    call op%project(this%fpx, this%b)
+    call this%apply_projector(this%fpx, this%b, .false.)
     this%b = this%b/this%scale
     this%lower = merge(op%lower, no_lower_bound, op%is_contact)
   end subroutine init
@@ -86,14 +89,33 @@ contains
     class(dual_problem_t), intent(inout) :: self
     real(dp), intent(in) :: x(:)
     real(dp), intent(out) :: y(:)
-    call self%op%project(x, self%px, self%last_g, self%last_z)
-    self%last_valid = .true.
+    call self%apply_projector(x, self%px, .true.)
     call self%op%apply_f(self%px, self%fpx)
-    call self%op%project(self%fpx, self%pfpx)
+    call self%apply_projector(self%fpx, self%pfpx, .false.)
     y = (self%pfpx + self%rho*(x - self%px))/self%scale
   end subroutine hessian
 
-  !> The penalty of the scaled QP: rho/s.
+  !> Extra set-up of an extension before b is formed (none here).
+  subroutine prepare(this)
+    class(dual_problem_t), intent(inout) :: this
+    if (.false.) this%n = this%n
+  end subroutine prepare
+
+  !> y = P x with one coarse solve; with `keep`, G x and (G G^T)^{-1} G x are
+  !> kept as those of the last Hessian argument (see track_*).
+  subroutine apply_projector(self, x, y, keep)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(inout) :: y(:)
+    logical, intent(in) :: keep
+    if (keep) then
+      call self%op%project(x, y, self%last_g, self%last_z)
+      self%last_valid = .true.
+    else
+      call self%op%project(x, y)
+    end if
+  end subroutine apply_projector
+
   !> x is now the argument of the last Hessian product.
   subroutine track_last(self)
     class(dual_problem_t), intent(inout) :: self
@@ -122,6 +144,7 @@ contains
     self%x_valid = .false.
   end subroutine track_reset
 
+  !> The penalty of the scaled QP: rho/s.
   real(dp) function penalty(self)
     class(dual_problem_t), intent(in) :: self
     penalty = self%rho/self%scale
@@ -174,7 +197,7 @@ contains
   subroutine free(this)
     class(dual_problem_t), intent(inout) :: this
     call this%free_base()
-    if (allocated(this%px)) deallocate (this%px, this%fpx, this%pfpx, this%gz, this%cz)
+    if (allocated(this%px)) deallocate (this%px, this%fpx, this%pfpx)
     if (allocated(this%last_g)) deallocate (this%last_g, this%last_z, this%x_g, this%x_z)
     this%op => null()
   end subroutine free
