@@ -4,15 +4,19 @@ alpha_bar = alpha - muhat) against the standard one (Eq. 10: G_A G_A^T
 assembled, factorized by MUMPS and solved), in the paper's weak-scaling
 setting (the counterpart of its Fig. 1).
 
-The `cube` case of CASES.md at fixed H/h (nel = 4,4,4 elements per subdomain)
-with nsub = N,N,N subdomains for each N given, on a fixed number of ranks, run
-by the Release binary; each size is repeated and the MEDIANS of the times in
-report.json are tabulated (Markdown) and plotted (log-log).
+The `cube` case of docs/CASES.md at fixed H/h (nel = 4,4,4 elements per
+subdomain) with nsub = N,N,N subdomains for each N given, on a fixed number of
+ranks, run by the Release binary that tools/run.sh builds (build/); each size
+is repeated and the MEDIANS of the times in report.json are tabulated
+(Markdown) and plotted (log-log).
 
     /usr/bin/python3 tools/reconstruction_cost.py \\
-        --program build-rec-rel/bin/feticontact --ranks 2 --sizes 2 4 8 16 \\
-        --repeats 3 3 3 1 --workdir /tmp/reconstruction_cost \\
-        --table docs/figures/reconstruction_cost.md --plot docs/figures/reconstruction_cost.png
+        --program build/bin/feticontact --ranks 2 --sizes 2 4 8 16 \\
+        --repeats 3 3 3 1 --workdir output/reconstruction_cost \\
+        --table output/reconstruction_cost/table.md --plot docs/figures/reconstruction_cost.png
+
+Run it from the repository root (the default paths are relative to it); the
+inputs, logs and report.json of every run stay in --workdir.
 
 Times read from report.json: reconstruction.new.seconds and
 reconstruction.standard.seconds (max over ranks of the 'rec new' and 'rec
@@ -110,7 +114,7 @@ def summarize(n, reports):
 
 def table(rows, args):
     lines = [
-        "Cube (CASES.md), nel = %d^3 per subdomain, tol = %s, %d MPI ranks, Release build; medians of the "
+        "Cube (docs/CASES.md), nel = %d^3 per subdomain, tol = %s, %d MPI ranks, Release build; medians of the "
         "runs (times in s; standard = assembly + factorization + solve of G_A G_A^T)." % (args.nel, args.tol, args.ranks),
         "",
         "| subdomains | coarse dim | primal dofs | dual dofs | active contact | runs | new (Eq. 24) | standard (Eq. 10) "
@@ -157,7 +161,7 @@ def plot(rows, path):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--program", default="build-rec-rel/bin/feticontact")
+    ap.add_argument("--program", default="build/bin/feticontact")
     ap.add_argument("--mpiexec", default="mpirun")
     ap.add_argument("--ranks", type=int, default=2)
     ap.add_argument("--sizes", type=int, nargs="+", default=[2, 4, 8, 16], help="N: nsub = N,N,N")
@@ -165,7 +169,7 @@ def main():
     ap.add_argument("--nel", type=int, default=4)
     ap.add_argument("--tol", default="1e-6")
     ap.add_argument("--timeout", type=int, default=1800, help="seconds per run")
-    ap.add_argument("--workdir", default="/tmp/reconstruction_cost")
+    ap.add_argument("--workdir", default="output/reconstruction_cost")
     ap.add_argument("--table", default=None, help="write the Markdown table here too")
     ap.add_argument("--plot", default="docs/figures/reconstruction_cost.png")
     ap.add_argument("--json", default=None, help="write the summary rows as JSON here")
