@@ -195,6 +195,7 @@ def main():
     print()
     print(text)
     if args.table:
+        os.makedirs(os.path.dirname(os.path.abspath(args.table)), exist_ok=True)
         with open(args.table, "w") as f:
             f.write(text)
     if args.json and not args.from_json:
