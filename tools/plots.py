@@ -282,7 +282,7 @@ def report_of(run):
 
 
 def block_exact_error(run):
-    """CASES.md `block`: max |u - u_exact| / max |u_exact|, u_exact = (nu p x/E, nu p y/E, -p z/E)."""
+    """docs/CASES.md `block`: max |u - u_exact| / max |u_exact|, u_exact = (nu p x/E, nu p y/E, -p z/E)."""
     case = report_of(run)["case"]
     p, young, nu = case["load"]["top_pressure"], case["material"]["young"], case["material"]["poisson"]
     x, u = read_h5(run["h5"])
@@ -487,7 +487,7 @@ def main():
     p = sub.add_parser("tolerance", help="(c) time and Hessian multiplications against KKT residual and error")
     p.add_argument("campaign", help="campaign of a --sweep solver:tol=... (runs must keep their .h5)")
     p.add_argument("--error", choices=["auto", "exact", "reference"], default="auto",
-                   help="exact: the `block` solution of CASES.md; reference: against --reference or the "
+                   help="exact: the `block` solution of docs/CASES.md; reference: against --reference or the "
                         "tightest run of the sweep (then left out of the plot); auto: exact when the obstacle "
                         "is a plane (default)")
     p.add_argument("--reference", help="HDF5 file of a tightly converged run of the same case")

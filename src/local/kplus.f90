@@ -1,5 +1,5 @@
 !> Generalized inverse K^+ of a floating subdomain stiffness matrix by
-!> regularization with fixing nodes (DESIGN.md, "Facts the code relies on").
+!> regularization with fixing nodes (docs/THEORY.md, "Generalized inverse K^+").
 !>
 !> K_reg = K + rho_f Q_F Q_F^T, where F is a small set of well separated
 !> "fixing" nodes of the subdomain and the columns of Q_F are an orthonormal

@@ -7,7 +7,7 @@
 !> The 8 nodes of an element are in the standard Q1 order: (i,j,k) (i+1,j,k)
 !> (i+1,j+1,k) (i,j+1,k), then the same at k+1.
 !>
-!> Distortion (CASES.md): every node not on the outer boundary moves by an
+!> Distortion (docs/CASES.md): every node not on the outer boundary moves by an
 !> offset in [-distortion*h(c), distortion*h(c)) in each component c, a hash of
 !> (gid, c, seed) alone, so every copy of a node sits at the same place.
 module box_mesh

@@ -41,7 +41,7 @@
 !> (counted in n_norm_updates, kept across calls). It restores
 !> alpha_bar <= 2/||A|| when the caller's estimate is low; with the default
 !> power method (within 0.4% of ||A||) it never triggered in the hard cases
-!> (docs/RESULTS_draft_hard.md, "Hessian norm estimate").
+!> (docs/RESULTS.md, "Hessian norm estimate").
 !>
 !> The stopping rule is an object (`mprgp_stop_t`) asked every iteration with
 !> the current x and ||g^P||, so that SMALBE can stop the inner loop on

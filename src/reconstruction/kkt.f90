@@ -1,4 +1,4 @@
-!> The KKT conditions of the primal contact problem (CASES.md), checked on the
+!> The KKT conditions of the primal contact problem (docs/CASES.md), checked on the
 !> reconstructed displacements u and the multipliers lambda; each residual is
 !> relative to the size of the terms it is made of:
 !> - equilibrium:      ||K u - f + B^T lambda|| / max(||K u||, ||f||, ||B^T lambda||, || |K| |u| ||)

@@ -7,7 +7,7 @@
 
 The input file is copied with the --set overrides merged into its groups and
 with &output directory pointing into DIR. Every check derives its expected
-values independently (the exact solution of CASES.md, the file formats), never
+values independently (the exact solution of docs/CASES.md, the file formats), never
 from numbers the program printed. Exit status 0 when every check passes.
 """
 import argparse
@@ -83,7 +83,7 @@ def fields(outdir):
 
 
 def check_block_exact(outdir, groups, tol):
-    """CASES.md `block`: u = (nu p x/E, nu p y/E, -p z/E), contact pressure p."""
+    """docs/CASES.md `block`: u = (nu p x/E, nu p y/E, -p z/E), contact pressure p."""
     p = float(value_of(groups, "load", "top_pressure", "0").replace("d", "e"))
     young = float(value_of(groups, "material", "young", "2.1e5"))
     nu = float(value_of(groups, "material", "poisson", "0.3"))

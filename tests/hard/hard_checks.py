@@ -1,4 +1,4 @@
-"""Exact solutions of the `block` family (CASES.md) for the hard cases.
+"""Exact solutions of the `block` family (docs/CASES.md) for the hard cases.
 
 Homogeneous material: u = (nu p x/E, nu p y/E, -p z/E) for any E, nu.
 Layered material with nu = 0 (E depends on z only, interfaces on element

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Run hard-case inputs and print the stability table (markdown).
 
-    stability_table.py --program build-hard-rel/bin/feticontact [--ranks 2] --workdir DIR \
+    stability_table.py --program build/bin/feticontact [--ranks 2] --workdir DIR \
         [--set group:variable=value ...] [--label NAME] inputs/hard/*.nml
 
 Each input runs once under mpiexec with &output directory pointing into

@@ -303,7 +303,7 @@ contains
     u_difference = total(1)/total(2)
   end function u_difference
 
-  !> max |u - u_exact| / max |u_exact| for `block` (CASES.md):
+  !> max |u - u_exact| / max |u_exact| for `block` (docs/CASES.md):
   !> u_exact = (nu p x/E, nu p y/E, -p z/E) at every node copy.
   real(dp) function block_error(p, op, u)
     type(params_t), intent(in) :: p
