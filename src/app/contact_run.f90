@@ -23,7 +23,8 @@ module contact_run
   use kkt, only: kkt_residuals_t, check_kkt
   use hdf5_output, only: output_fields_t, write_fields, check_output_directory
   use json_writer, only: json_writer_t
-  use report, only: print_timing_table, timings_json, memory_json
+  use report, only: print_timing_table, timings_json, memory_json, blas_json
+  use blas_threads, only: blas_in_use
   use mpi_f08, only: MPI_Comm, MPI_Comm_size, MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_Barrier, MPI_IN_PLACE
   implicit none
   private
@@ -273,6 +274,9 @@ contains
       call js%add('contact_radius', contact%contact_radius)
       call js%end_object()
       call js%add_raw('memory', memory)
+      associate (b => blas_in_use())                 ! set up by the main program
+        call js%add_raw('blas', blas_json(b%library, b%path, b%threads, b%source, b%settable))
+      end associate
       call js%begin_object('performance')
       call js%add('f_bytes_per_action_sum', f_bytes)
       call js%add('f_action_seconds_per_call', f_seconds)

@@ -2,6 +2,8 @@
 !>
 !> Usage: mpirun -n P feticontact [--check] input.nml
 !>   --check  read and check the input, echo the settings, and exit.
+!> Environment: FETICONTACT_BLAS_THREADS = BLAS threads per rank (default 1;
+!> see blas_threads and docs/INPUT.md).
 program feticontact
   use, intrinsic :: iso_fortran_env, only: output_unit
   use kinds, only: path_len
@@ -9,6 +11,7 @@ program feticontact
   use logger, only: logger_init, log_section, log_message, log_is_root
   use params, only: params_t, read_params, echo_params
   use contact_run, only: run_contact_case
+  use blas_threads, only: blas_threads_setup, blas_log_line
   use mpi_f08, only: MPI_Init, MPI_Finalize, MPI_COMM_WORLD, MPI_Comm_size
   implicit none
 
@@ -20,6 +23,8 @@ program feticontact
   call MPI_Init(ierr)
   call logger_init(MPI_COMM_WORLD)
   call MPI_Comm_size(MPI_COMM_WORLD, nranks, ierr)
+  ! before any BLAS work: one BLAS thread per rank unless the user says otherwise
+  call blas_threads_setup(MPI_COMM_WORLD)
 
   check_only = .false.
   status = 0
@@ -45,6 +50,7 @@ program feticontact
   call read_params(file, MPI_COMM_WORLD, p)
   call log_section('feticontact: settings used')
   if (log_is_root()) call echo_params(p, output_unit)
+  call log_message(blas_log_line())
 
   if (.not. check_only) call run_contact_case(p, MPI_COMM_WORLD, status)
   if (check_only) call log_message('input checked: OK')

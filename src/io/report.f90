@@ -9,7 +9,7 @@ module report
   implicit none
   private
 
-  public :: print_timing_table, timings_json, peak_rss_bytes, memory_json
+  public :: print_timing_table, timings_json, peak_rss_bytes, memory_json, blas_json
 
 contains
 
@@ -124,4 +124,22 @@ contains
     call w%end_object()
     json = w%text()
   end function memory_json
+
+  !> {"library", "path", "threads", "source", "multithreaded"}: the BLAS in use,
+  !> its threads per rank and what set them (see blas_threads).
+  function blas_json(library, path, threads, source, multithreaded) result(json)
+    character(len=*), intent(in) :: library, path, source
+    integer, intent(in) :: threads
+    logical, intent(in) :: multithreaded
+    character(len=:), allocatable :: json
+    type(json_writer_t) :: w
+    call w%begin_object()
+    call w%add('library', library)
+    call w%add('path', path)
+    call w%add('threads', threads)
+    call w%add('source', source)
+    call w%add('multithreaded', multithreaded)
+    call w%end_object()
+    json = w%text()
+  end function blas_json
 end module report
