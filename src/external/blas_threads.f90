@@ -32,12 +32,12 @@ module blas_threads
 
   !> What `blas_threads_setup` found and did.
   type, public :: blas_info_t
-    character(len=:), allocatable :: library   !< e.g. 'OpenBLAS 0.3.21 (pthread)'
-    character(len=:), allocatable :: path      !< the file that provides dgemm_
-    character(len=:), allocatable :: source    !< 'default', 'FETICONTACT_BLAS_THREADS', 'OPENBLAS_NUM_THREADS', ...
+    character(len=512) :: library = 'not set up'   !< e.g. 'OpenBLAS 0.3.21 (pthread)'
+    character(len=path_len) :: path = 'unknown'   !< the file that provides dgemm_
+    character(len=32) :: source = 'none'           !< 'default', 'FETICONTACT_BLAS_THREADS', 'OPENBLAS_NUM_THREADS', ...
     integer :: threads = 1         !< threads per rank the library will use (max over the ranks)
     integer :: requested = 1       !< threads per rank asked by the source
-    logical :: settable = .false.  !< the library can run (and was given) more than one thread
+    logical :: settable = .false.  !< the library can run more than one thread
     logical :: uniform = .true.    !< every rank has the same thread count
   end type blas_info_t
 
@@ -83,7 +83,7 @@ contains
   subroutine blas_threads_setup(comm)
     type(MPI_Comm), intent(in) :: comm
     character(len=64) :: value
-    character(len=:), allocatable :: text, user_variable
+    character(len=:), allocatable :: text, user_variable, library
     integer(c_int) :: owner, mask, k, threaded
     integer :: requested, counts(2), ierr
     logical :: valid, given
@@ -104,13 +104,14 @@ contains
     ! 2. the library that provides dgemm_, and every thread control in the process
     owner = fc_blas_owner_kind()
     mask = fc_blas_kinds()
-    info%library = c_text(describe(owner, threaded))
+    library = c_text(describe(owner, threaded))
     info%settable = threaded /= 0
     do k = kind_openblas, kind_mkl
       if (k == owner .or. .not. btest(mask, k)) cycle
-      info%library = info%library//' (also in the process: '//c_text(describe(k, threaded))//')'
+      library = library//' (also in the process: '//c_text(describe(k, threaded))//')'
       info%settable = info%settable .or. threaded /= 0
     end do
+    info%library = library
     info%path = c_text(library_path())
     if (given) then
       info%source = blas_threads_variable
@@ -143,11 +144,6 @@ contains
   function blas_in_use() result(b)
     type(blas_info_t) :: b
     b = info
-    if (.not. allocated(b%library)) then
-      b%library = 'not set up'
-      b%path = 'unknown'
-      b%source = 'none'
-    end if
   end function blas_in_use
 
   !> One line for the log, e.g. 'BLAS: OpenBLAS 0.3.21 (pthread) /usr/lib/x86_64-linux-gnu/openblas-pthread/
@@ -158,17 +154,17 @@ contains
     character(len=16) :: n
     b = blas_in_use()
     write (n, '(i0)') b%threads
-    line = 'BLAS: '//b%library//' '//b%path//', '//trim(n)//' thread'
+    line = 'BLAS: '//trim(b%library)//' '//trim(b%path)//', '//trim(n)//' thread'
     if (b%threads /= 1) line = line//'s'
     if (.not. b%uniform) line = line//' (the most of any rank)'
     line = line//' per rank ('
-    select case (b%source)
+    select case (trim(b%source))
     case ('default')
       line = line//'default'
     case (blas_threads_variable)
       line = line//'from '//blas_threads_variable
     case default
-      line = line//'from '//b%source//' in the environment'
+      line = line//'from '//trim(b%source)//' in the environment'
     end select
     if (b%requested /= b%threads) then
       write (n, '(i0)') b%requested
