@@ -37,7 +37,7 @@ program test_params
   call assert_true(p%output%directory == 'elsewhere', 'output directory', HERE)
   call assert_true(p%output%run_name == 'good', 'output run_name', HERE)
 
-  ! defaults of variables the file leaves alone (CASES.md: E = 2.1e5, nu default 0.3)
+  ! defaults of variables the file leaves alone (docs/CASES.md: E = 2.1e5, nu default 0.3)
   call assert_close(2.1e5_dp, p%material%young, 0.0_dp, 'default young', HERE)
   call assert_close(1.0_dp, p%mesh%lengths(3), 0.0_dp, 'default lengths(3)', HERE)
   call assert_true(p%mesh%mapping == 'block', 'default mapping', HERE)
