@@ -1,17 +1,14 @@
-!> One run of the pipeline of DESIGN.md on already checked parameters:
+!> One run of the pipeline (docs/ARCHITECTURE.md, "The pipeline") on checked parameters:
 !> set-up of the TFETI operators, the SMALBE/MPRGP dual solve, the two
 !> reconstructions, the KKT check, HDF5/XDMF output, report.json and the
 !> timing table. Returns the exit status of the run.
 module contact_run
-  use, intrinsic :: iso_fortran_env, only: output_unit
   use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_IP, MPI_INT_I8
   use errors, only: exit_not_converged, exit_kkt_failed
-  use logger, only: log_section, log_message, log_is_root
+  use logger, only: log_section, log_message
   use timers, only: timer_start, timer_stop, timers_reduce, timer_stat_t, timer_seconds
   use params, only: params_t, params_json
-  use box_mesh, only: box_mesh_t
   use assembly, only: subdomain_von_mises
-  use constraints, only: row_contact
   use feti_operators, only: feti_t, local_field_t
   use qp_problem, only: qp_status_name, qp_problem_t
   use dual_problem, only: dual_problem_t

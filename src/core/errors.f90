@@ -13,7 +13,7 @@ module errors
   implicit none
   private
 
-  public :: fatal_error, collective_error, check_status, exit_process
+  public :: fatal_error, collective_error, exit_process
 
   interface
     !> The C library's exit: ends the process with a status and no Fortran
@@ -80,14 +80,4 @@ contains
     call c_exit(int(status, c_int))
   end subroutine exit_process
 
-  !> Abort with `message` when `status` is non-zero (for library return codes).
-  subroutine check_status(status, message)
-    integer, intent(in) :: status
-    character(len=*), intent(in) :: message
-    character(len=32) :: buf
-    if (status /= 0) then
-      write (buf, '(i0)') status
-      call fatal_error(trim(message)//' (status '//trim(buf)//')')
-    end if
-  end subroutine check_status
 end module errors

@@ -3,14 +3,14 @@
 !> Timers accumulate: start/stop pairs with the same name add up. Every rank
 !> must call `timers_reduce` together; a timer a rank never used counts as 0 s.
 module timers
-  use kinds, only: dp, ip, name_len, MPI_REAL_DP
+  use kinds, only: dp, name_len, MPI_REAL_DP
   use errors, only: fatal_error
-  use mpi_f08, only: MPI_Comm, MPI_Wtime, MPI_Allreduce, MPI_Bcast, MPI_Comm_size, &
-                     MPI_Comm_rank, MPI_MIN, MPI_MAX, MPI_SUM, MPI_CHARACTER, MPI_INTEGER
+  use mpi_f08, only: MPI_Comm, MPI_Wtime, MPI_Allreduce, MPI_Bcast, MPI_Comm_size, MPI_MIN, MPI_MAX, &
+    MPI_SUM, MPI_CHARACTER, MPI_INTEGER
   implicit none
   private
 
-  public :: timer_start, timer_stop, timer_seconds, timers_reduce, timers_reset
+  public :: timer_start, timer_stop, timer_seconds, timers_reduce
 
   integer, parameter :: max_timers = 64
 
@@ -71,14 +71,6 @@ contains
     timer_seconds = 0
     if (i > 0) timer_seconds = total(i)
   end function timer_seconds
-
-  !> Forget all timers.
-  subroutine timers_reset()
-    count = 0
-    names = ''
-    total = 0
-    started = -1
-  end subroutine timers_reset
 
   !> Min / max / mean over the ranks of `comm` of every timer rank 0 knows,
   !> in the order rank 0 first started them. Collective.

@@ -3,7 +3,7 @@
 !> with METIS_OPTION_NUMBERING = 1), and every call uses a fixed seed so that
 !> every rank computes the same partition from the same graph.
 module metis_wrapper
-  use, intrinsic :: iso_c_binding, only: c_int, c_float, c_ptr, c_null_ptr, c_loc
+  use, intrinsic :: iso_c_binding, only: c_int, c_ptr, c_null_ptr, c_loc
   use kinds, only: ip
   use errors, only: fatal_error
   implicit none

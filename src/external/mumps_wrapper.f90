@@ -89,7 +89,6 @@ module mumps_wrapper
     procedure :: factor_bytes
     procedure :: factor_entries
     procedure :: order
-    procedure :: is_host
     procedure :: is_factorized
     procedure :: free
   end type mumps_t
@@ -352,12 +351,6 @@ contains
     class(mumps_t), intent(in) :: this
     order = this%n
   end function order
-
-  !> True on the rank that holds the centralized matrix, rhs and solution.
-  logical function is_host(this)
-    class(mumps_t), intent(in) :: this
-    is_host = this%rank == 0
-  end function is_host
 
   !> True after a successful factorization.
   logical function is_factorized(this)

@@ -24,7 +24,6 @@
 !> message inside MUMPS.
 module coarse_problem
   use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_IP
-  use errors, only: fatal_error
   use decomposition, only: decomposition_t, subdomain_graph
   use metis_wrapper, only: metis_node_nd
   use constraints, only: constraints_t

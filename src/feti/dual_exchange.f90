@@ -10,9 +10,8 @@
 module dual_exchange
   use kinds, only: dp, ip, MPI_REAL_DP
   use errors, only: fatal_error
-  use mpi_f08, only: MPI_Comm, MPI_Dist_graph_create_adjacent, MPI_Neighbor_alltoallv, &
-                     MPI_UNWEIGHTED, MPI_INFO_NULL, MPI_Comm_free, MPI_COMM_NULL, MPI_Datatype, &
-                     operator(/=)
+  use mpi_f08, only: MPI_Comm, MPI_Dist_graph_create_adjacent, MPI_Neighbor_alltoallv, MPI_UNWEIGHTED, &
+    MPI_INFO_NULL, MPI_Comm_free, MPI_COMM_NULL, operator(/=)
   implicit none
   private
 
@@ -34,7 +33,6 @@ module dual_exchange
     procedure :: init
     procedure :: gather
     procedure :: scatter_add
-    procedure :: gather_multi
     procedure :: scatter_add_multi
     procedure :: free
   end type dual_exchange_t
@@ -118,29 +116,6 @@ contains
       own(this%send_index(i)) = own(this%send_index(i)) + this%send_buffer(i)
     end do
   end subroutine scatter_add
-
-  !> `gather` of ncomp values per entry: own(ncomp, n_own) -> local(ncomp, n_local).
-  !> For set-up only (allocates its buffers).
-  subroutine gather_multi(this, ncomp, own, local)
-    class(dual_exchange_t), intent(inout) :: this
-    integer, intent(in) :: ncomp
-    real(dp), intent(in) :: own(:, :)
-    real(dp), intent(inout) :: local(:, :)
-    real(dp), allocatable :: sbuf(:, :), rbuf(:, :)
-    integer :: i, ierr
-
-    local(:, 1:this%n_own) = own(:, 1:this%n_own)
-    allocate (sbuf(ncomp, max(1, size(this%send_index))), rbuf(ncomp, max(1, size(this%recv_index))))
-    do i = 1, size(this%send_index)
-      sbuf(:, i) = own(:, this%send_index(i))
-    end do
-    call MPI_Neighbor_alltoallv(sbuf, ncomp*this%send_counts, ncomp*this%send_displs, MPI_REAL_DP, &
-                                rbuf, ncomp*this%recv_counts, ncomp*this%recv_displs, MPI_REAL_DP, &
-                                this%graph_comm, ierr)
-    do i = 1, size(this%recv_index)
-      local(:, this%recv_index(i)) = rbuf(:, i)
-    end do
-  end subroutine gather_multi
 
   !> `scatter_add` of ncomp values per entry. For set-up only.
   subroutine scatter_add_multi(this, ncomp, local, own)

@@ -10,7 +10,6 @@
 !> Work arrays are allocated once in `setup`; the operators allocate nothing.
 module feti_operators
   use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_I8
-  use errors, only: fatal_error
   use logger, only: log_message
   use timers, only: timer_start, timer_stop
   use params, only: params_t
@@ -65,7 +64,6 @@ module feti_operators
     procedure :: primal
     procedure :: apply_bt
     procedure :: apply_b
-    procedure :: gather_local
     procedure :: estimate_norm_pfp
     procedure :: local_solve
     procedure :: bytes_per_f_action
@@ -258,14 +256,6 @@ contains
     real(dp), intent(in) :: x(:)
     norm = sqrt(this%dot(x, x))
   end function norm
-
-  !> The local rows (owned and ghosts) of a dual vector.
-  subroutine gather_local(this, x, xloc)
-    class(feti_t), intent(inout) :: this
-    real(dp), intent(in) :: x(:)
-    real(dp), intent(inout) :: xloc(:)
-    call this%con%exchange%gather(x, xloc)
-  end subroutine gather_local
 
   !> u^s = K^+ (f^s - B^s^T lambda) + R^s alpha^s for every local subdomain.
   subroutine primal(this, lambda, alpha, u)

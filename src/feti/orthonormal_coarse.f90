@@ -13,7 +13,7 @@
 !> Vectors: dual vectors are the owned multipliers (length con%n_own); coarse
 !> vectors here are REPLICATED (length n = 6N, global coarse positions of
 !> coarse_problem's layout: rank-major, ascending subdomain id within a rank).
-!> `to_local` / `from_local` convert to and from the local coarse blocks of
+!> `to_local` converts to the local coarse blocks of
 !> feti_operators (6 per local subdomain).
 !>
 !> Assembly: every owned row r adds g_r g_r^T, g_r = G e_r with one 6-block
@@ -37,8 +37,7 @@ module orthonormal_coarse
   use decomposition, only: decomposition_t
   use constraints, only: constraints_t
   use coarse_problem, only: coarse_layout_t, owned_row_blocks, row_blocks
-  use mpi_f08, only: MPI_Comm, MPI_Allreduce, MPI_Allgatherv, MPI_IN_PLACE, MPI_SUM, &
-                     MPI_MAX, MPI_Wtime, MPI_INTEGER
+  use mpi_f08, only: MPI_Comm, MPI_Allreduce, MPI_IN_PLACE, MPI_SUM, MPI_MAX, MPI_Wtime, MPI_INTEGER
   implicit none
   private
 
@@ -107,10 +106,8 @@ module orthonormal_coarse
     procedure :: apply
     procedure :: apply_t
     procedure :: project
-    procedure :: forward_solve
     procedure :: backward_solve
     procedure :: to_local
-    procedure :: from_local
     procedure :: bytes
     procedure :: free
   end type orthonormal_coarse_t
@@ -297,13 +294,6 @@ contains
     y(1:this%n_own) = x(1:this%n_own) - y(1:this%n_own)
   end subroutine project
 
-  !> b <- L^{-1} b (replicated, length n). Local.
-  subroutine forward_solve(this, b)
-    class(orthonormal_coarse_t), intent(in) :: this
-    real(dp), intent(inout) :: b(:)
-    call dtrsv('L', 'N', 'N', this%n, this%l, this%n, b, 1)
-  end subroutine forward_solve
-
   !> x <- L^{-T} x (replicated, length n). Local.
   subroutine backward_solve(this, x)
     class(orthonormal_coarse_t), intent(in) :: this
@@ -323,17 +313,6 @@ contains
       zloc(6*ls - 5:6*ls) = z(6*p - 5:6*p)
     end do
   end subroutine to_local
-
-  !> The replicated coarse vector of the local coarse blocks of all ranks
-  !> (positions are rank-major, so this is one MPI_Allgatherv). Collective.
-  subroutine from_local(this, zloc, z)
-    class(orthonormal_coarse_t), intent(in) :: this
-    real(dp), intent(in) :: zloc(:)
-    real(dp), intent(out) :: z(:)
-    integer :: ierr
-    call MPI_Allgatherv(zloc, 6*this%nlocal, MPI_REAL_DP, z, this%counts, this%displs, MPI_REAL_DP, &
-                        this%comm, ierr)
-  end subroutine from_local
 
   !> Bytes held on this rank (L and the blocks of G~).
   integer(i8) function bytes(this)

@@ -98,7 +98,6 @@ contains
   !> Extra set-up of an extension before b is formed (none here).
   subroutine prepare(this)
     class(dual_problem_t), intent(inout) :: this
-    if (.false.) this%n = this%n
   end subroutine prepare
 
   !> y = P x with one coarse solve; with `keep`, G x and (G G^T)^{-1} G x are

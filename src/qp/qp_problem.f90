@@ -207,13 +207,11 @@ contains
   !> x - alpha v, and track_reset when x changed otherwise. No-ops by default.
   subroutine default_track(self)
     class(qp_problem_t), intent(inout) :: self
-    if (.false.) self%n = self%n
   end subroutine default_track
 
   subroutine default_track_step(self, alpha)
     class(qp_problem_t), intent(inout) :: self
     real(dp), intent(in) :: alpha
-    if (.false.) self%n = self%n + int(alpha)
   end subroutine default_track_step
 
   !> Global x^T y (compensated, independent of the distribution).

@@ -3,7 +3,7 @@
 !>
 !>   u = K^+ (f - B^T lambda) + R alpha_bar.
 !>
-!> The rigid body amplitudes alpha_bar by two formulas (DESIGN.md, with a
+!> The rigid body amplitudes alpha_bar by two formulas (docs/THEORY.md, with a
 !> right-hand side c; g = F lambda - d is the dual gradient):
 !> - new (Eq. 14 + 24): alpha = (G G^T)^{-1} G g with the coarse factorization
 !>   already at hand, then alpha_bar = alpha - muhat, muhat = L^{-T} mu the
@@ -24,7 +24,7 @@
 module reconstruction
   use kinds, only: dp, ip, MPI_REAL_DP, MPI_INT_IP
   use timers, only: timer_start, timer_stop
-  use feti_operators, only: feti_t, local_field_t
+  use feti_operators, only: feti_t
   use coarse_problem, only: coarse_problem_t
   use orthonormal_coarse, only: orthonormal_coarse_t
   use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_Wtime

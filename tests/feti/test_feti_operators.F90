@@ -10,8 +10,8 @@ program test_feti_operators
   use params, only: params_t
   use feti_operators, only: feti_t, local_field_t
   use feti_test_support, only: small_case, gather_keyed, coarse_norm
-  use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_COMM_SELF, MPI_Comm_rank, MPI_Comm_size, MPI_Comm, &
-                     MPI_Gatherv, MPI_Allgather, MPI_INTEGER, MPI_DOUBLE_PRECISION, MPI_Barrier
+  use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_COMM_SELF, MPI_Comm_rank, MPI_Comm_size, MPI_Gatherv, &
+    MPI_Allgather, MPI_INTEGER, MPI_DOUBLE_PRECISION
   implicit none
   integer :: ierr, rank, nranks
 
