@@ -12,6 +12,7 @@ module assembly
                         von_mises, q1_face_nodes
   use materials, only: subdomain_material
   use rigid_modes, only: rigid_body_modes
+  use sorting, only: sort_ints
   implicit none
   private
 
@@ -93,7 +94,7 @@ contains
           adj(nadj) = b
         end do
       end do
-      call insertion_sort(adj(first:nadj))
+      call sort_ints(adj(first:nadj))
       adjptr(a + 1) = nadj + 1
     end do
     ! CSR pattern: row 3(a-1)+c holds columns 3(b-1)+1..3 for b adjacent to a
@@ -140,20 +141,6 @@ contains
     end do
   end subroutine assemble_stiffness
 
-  pure subroutine insertion_sort(v)
-    integer(ip), intent(inout) :: v(:)
-    integer(ip) :: i, j, t
-    do i = 2, size(v)
-      t = v(i)
-      j = i - 1
-      do while (j >= 1)
-        if (v(j) <= t) exit
-        v(j + 1) = v(j)
-        j = j - 1
-      end do
-      v(j + 1) = t
-    end do
-  end subroutine insertion_sort
 
   !> f += consistent nodal forces of a uniform traction (force per area) on
   !> the element faces of `sub` that lie on box face `face` (face_x0 ... face_z1).

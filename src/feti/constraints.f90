@@ -39,8 +39,7 @@ module constraints
   use params, only: params_t
   use decomposition, only: decomposition_t
   use subdomain, only: subdomain_t
-  use key_sort, only: sort_permutation
-  use sorting, only: sort_unique
+  use sorting, only: sort_permutation, sort_unique
   use dual_exchange, only: dual_exchange_t
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Allreduce, MPI_Exscan, MPI_SUM
   use materials, only: subdomain_material
@@ -59,7 +58,7 @@ module constraints
     integer(ip), allocatable :: dof(:)     !< subdomain dof
     integer(ip), allocatable :: slot(:)    !< position of this subdomain in the node's copy list
     real(dp), allocatable :: val(:)
-    real(dp), allocatable :: g(:, :)       !< (6, nentries), filled by feti_operators
+    real(dp), allocatable :: g(:, :)       !< (6, nentries) entries of G^T = B R
   end type subdomain_rows_t
 
   type, public :: constraints_t
@@ -95,8 +94,8 @@ contains
     row_key = ((int(gid, i8)*3 + (comp - 1))*4 + kind)*8 + (index - 1)
   end function row_key
 
-  !> Build B, c and the exchange pattern for the local subdomains `subs`
-  !> (geometry only is needed). Collective over `comm`.
+  !> Build B, c, the entries of G^T = B R and the exchange pattern for the
+  !> local subdomains `subs` (geometry and R^s are needed). Collective over `comm`.
   subroutine build_constraints(p, dec, subs, comm, con)
     type(params_t), intent(in) :: p
     type(decomposition_t), intent(in) :: dec
@@ -216,7 +215,7 @@ contains
         bs%dof(bs%nentries) = rec(i)%dof
         bs%val(bs%nentries) = rec(i)%val
         bs%slot(bs%nentries) = rec(i)%slot
-        bs%g(:, bs%nentries) = 0
+        bs%g(:, bs%nentries) = rec(i)%val*subs(rec(i)%sub)%R(rec(i)%dof, :)   ! G^T = B R
       end associate
     end do
 

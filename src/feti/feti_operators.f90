@@ -81,7 +81,7 @@ contains
     class(feti_t), intent(inout) :: this
     type(params_t), intent(in) :: p
     type(MPI_Comm), intent(in) :: comm
-    integer(ip) :: ls, e
+    integer(ip) :: ls
     integer :: ierr
     integer(i8) :: mydofs
 
@@ -123,13 +123,6 @@ contains
 
     call timer_start('B and G')
     call build_constraints(p, this%dec, this%subs, comm, this%con)
-    do ls = 1, this%nlocal
-      associate (bs => this%con%b(ls), R => this%subs(ls)%R)
-        do e = 1, bs%nentries
-          bs%g(:, e) = bs%val(e)*R(bs%dof(e), :)
-        end do
-      end associate
-    end do
     mydofs = this%offset(this%nlocal + 1)
     call MPI_Allreduce(mydofs, this%primal_dofs, 1, MPI_INT_I8, MPI_SUM, comm, ierr)
     allocate (this%wloc(this%con%n_local), this%wloc2(this%con%n_local), &

@@ -129,7 +129,7 @@ contains
   end subroutine check_orthonormal_size
 
   !> Assemble G G^T, factorize it and form this rank's columns of G~.
-  !> `con%b(:)%g` must hold the entries of G^T (feti_t%setup fills them).
+  !> `con%b(:)%g` holds the entries of G^T (build_constraints fills them).
   !> Collective over `comm`.
   subroutine init(this, dec, con, layout, comm)
     class(orthonormal_coarse_t), intent(inout) :: this

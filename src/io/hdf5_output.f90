@@ -26,6 +26,7 @@
 !> written under `<name>.tmp` and renamed when complete, so a reader never
 !> sees a partial file under the final name.
 module hdf5_output
+  use, intrinsic :: iso_c_binding, only: c_ptr, c_loc, c_null_ptr
   use kinds, only: dp, ip, i8, MPI_INT_I8
   use errors, only: fatal_error, collective_error, exit_input_error
   use file_system, only: is_directory, make_directories, rename_file, process_id
@@ -43,6 +44,10 @@ module hdf5_output
   public :: write_fields, check_output_directory
 
   integer, parameter :: msg_len = 1024
+
+  interface write_dataset
+    module procedure write_real_2d, write_real_1d, write_int_2d, write_int_1d
+  end interface write_dataset
 
   !> This rank's share of the fields (plain arrays, filled by the caller).
   type, public :: output_fields_t
@@ -195,17 +200,17 @@ contains
     call h5check(hdferr, 'select collective transfers', s)
 
     call set_rows(s, offsets(1), totals(1), counts(1))
-    call write_real_2d(s, 'coordinates', fields%coordinates)
-    call write_real_2d(s, 'displacement', fields%displacement)
+    call write_dataset(s, 'coordinates', fields%coordinates)
+    call write_dataset(s, 'displacement', fields%displacement)
     call set_rows(s, offsets(2), totals(2), counts(2))
-    call write_int_2d(s, 'connectivity', global_connectivity)
-    call write_int_1d(s, 'subdomain', fields%subdomain)
-    call write_real_1d(s, 'von_mises', fields%von_mises)
+    call write_dataset(s, 'connectivity', global_connectivity)
+    call write_dataset(s, 'subdomain', fields%subdomain)
+    call write_dataset(s, 'von_mises', fields%von_mises)
     call set_rows(s, offsets(3), totals(3), counts(3))
-    call write_real_2d(s, 'contact_coordinates', fields%contact_coordinates)
-    call write_real_1d(s, 'contact_pressure', fields%contact_pressure)
-    call write_real_1d(s, 'contact_gap', fields%contact_gap)
-    call write_int_1d(s, 'contact_vertices', vertices)
+    call write_dataset(s, 'contact_coordinates', fields%contact_coordinates)
+    call write_dataset(s, 'contact_pressure', fields%contact_pressure)
+    call write_dataset(s, 'contact_gap', fields%contact_gap)
+    call write_dataset(s, 'contact_vertices', vertices)
 
     call h5pclose_f(s%xfer, hdferr)
     call h5check(hdferr, 'close the transfer property list', s)
@@ -324,103 +329,76 @@ contains
     call h5check(hdferr, 'close dataset /'//name, s)
   end subroutine close_slab
 
-  ! The writers below differ only in the type and rank of the buffer. A
-  ! dataset with no rows at all is created and left empty (every rank knows
-  ! the total, so every rank skips the write together).
+  ! The generic write_dataset: the specific procedures only name the HDF5 type
+  ! and the number of components of the buffer; write_buffer does the rest.
 
   subroutine write_real_2d(s, name, values)
     type(slab_t), intent(in) :: s
     character(len=*), intent(in) :: name
-    real(dp), intent(in) :: values(:,:)
-    integer(hid_t) :: dset, filespace, memspace, type_id
-    real(dp) :: dummy(size(values, 1), 1)
-    integer :: hdferr
-
-    type_id = h5kind_to_type(dp, H5_REAL_KIND)
-    call open_slab(s, name, type_id, size(values, 1), dset, filespace, memspace)
-    if (s%total > 0) then
-      if (s%local > 0) then
-        call h5dwrite_f(dset, type_id, values, shape(values, hsize_t), hdferr, &
-                        mem_space_id=memspace, file_space_id=filespace, xfer_prp=s%xfer)
-      else
-        dummy = 0
-        call h5dwrite_f(dset, type_id, dummy, shape(dummy, hsize_t), hdferr, &
-                        mem_space_id=memspace, file_space_id=filespace, xfer_prp=s%xfer)
-      end if
-      call h5check(hdferr, 'write dataset /'//name, s)
-    end if
-    call close_slab(s, name, dset, filespace, memspace)
+    real(dp), intent(in), target, contiguous :: values(:,:)
+    type(c_ptr) :: buffer
+    buffer = c_null_ptr
+    if (size(values) > 0) buffer = c_loc(values)
+    call write_buffer(s, name, h5kind_to_type(dp, H5_REAL_KIND), size(values, 1), buffer)
   end subroutine write_real_2d
 
   subroutine write_real_1d(s, name, values)
     type(slab_t), intent(in) :: s
     character(len=*), intent(in) :: name
-    real(dp), intent(in) :: values(:)
-    integer(hid_t) :: dset, filespace, memspace, type_id
-    real(dp) :: dummy(1)
-    integer :: hdferr
-
-    type_id = h5kind_to_type(dp, H5_REAL_KIND)
-    call open_slab(s, name, type_id, 0, dset, filespace, memspace)
-    if (s%total > 0) then
-      if (s%local > 0) then
-        call h5dwrite_f(dset, type_id, values, shape(values, hsize_t), hdferr, &
-                        mem_space_id=memspace, file_space_id=filespace, xfer_prp=s%xfer)
-      else
-        dummy = 0
-        call h5dwrite_f(dset, type_id, dummy, shape(dummy, hsize_t), hdferr, &
-                        mem_space_id=memspace, file_space_id=filespace, xfer_prp=s%xfer)
-      end if
-      call h5check(hdferr, 'write dataset /'//name, s)
-    end if
-    call close_slab(s, name, dset, filespace, memspace)
+    real(dp), intent(in), target, contiguous :: values(:)
+    type(c_ptr) :: buffer
+    buffer = c_null_ptr
+    if (size(values) > 0) buffer = c_loc(values)
+    call write_buffer(s, name, h5kind_to_type(dp, H5_REAL_KIND), 0, buffer)
   end subroutine write_real_1d
 
   subroutine write_int_2d(s, name, values)
     type(slab_t), intent(in) :: s
     character(len=*), intent(in) :: name
-    integer(ip), intent(in) :: values(:,:)
-    integer(hid_t) :: dset, filespace, memspace, type_id
-    integer(ip) :: dummy(size(values, 1), 1)
-    integer :: hdferr
-
-    type_id = h5kind_to_type(ip, H5_INTEGER_KIND)
-    call open_slab(s, name, type_id, size(values, 1), dset, filespace, memspace)
-    if (s%total > 0) then
-      if (s%local > 0) then
-        call h5dwrite_f(dset, type_id, values, shape(values, hsize_t), hdferr, &
-                        mem_space_id=memspace, file_space_id=filespace, xfer_prp=s%xfer)
-      else
-        dummy = 0
-        call h5dwrite_f(dset, type_id, dummy, shape(dummy, hsize_t), hdferr, &
-                        mem_space_id=memspace, file_space_id=filespace, xfer_prp=s%xfer)
-      end if
-      call h5check(hdferr, 'write dataset /'//name, s)
-    end if
-    call close_slab(s, name, dset, filespace, memspace)
+    integer(ip), intent(in), target, contiguous :: values(:,:)
+    type(c_ptr) :: buffer
+    buffer = c_null_ptr
+    if (size(values) > 0) buffer = c_loc(values)
+    call write_buffer(s, name, h5kind_to_type(ip, H5_INTEGER_KIND), size(values, 1), buffer)
   end subroutine write_int_2d
 
   subroutine write_int_1d(s, name, values)
     type(slab_t), intent(in) :: s
     character(len=*), intent(in) :: name
-    integer(ip), intent(in) :: values(:)
-    integer(hid_t) :: dset, filespace, memspace, type_id
-    integer(ip) :: dummy(1)
+    integer(ip), intent(in), target, contiguous :: values(:)
+    type(c_ptr) :: buffer
+    buffer = c_null_ptr
+    if (size(values) > 0) buffer = c_loc(values)
+    call write_buffer(s, name, h5kind_to_type(ip, H5_INTEGER_KIND), 0, buffer)
+  end subroutine write_int_1d
+
+  !> Dataset `name` of `s%total` rows of `ncomp` values of `type_id` (a vector
+  !> when `ncomp` is 0) from this rank's rows at `buffer`. A rank without rows
+  !> still takes part in the collective write (with a dummy buffer and nothing
+  !> selected); a dataset with no rows at all is created and left empty
+  !> (every rank knows the total, so every rank skips the write together).
+  subroutine write_buffer(s, name, type_id, ncomp, buffer)
+    type(slab_t), intent(in) :: s
+    character(len=*), intent(in) :: name
+    integer(hid_t), intent(in) :: type_id
+    integer, intent(in) :: ncomp
+    type(c_ptr), intent(in) :: buffer
+    integer(hid_t) :: dset, filespace, memspace
+    real(dp), target :: dummy(max(ncomp, 1))
     integer :: hdferr
 
-    type_id = h5kind_to_type(ip, H5_INTEGER_KIND)
-    call open_slab(s, name, type_id, 0, dset, filespace, memspace)
+    call open_slab(s, name, type_id, ncomp, dset, filespace, memspace)
     if (s%total > 0) then
+      dummy = 0
       if (s%local > 0) then
-        call h5dwrite_f(dset, type_id, values, shape(values, hsize_t), hdferr, &
-                        mem_space_id=memspace, file_space_id=filespace, xfer_prp=s%xfer)
+        call h5dwrite_f(dset, type_id, buffer, hdferr, mem_space_id=memspace, file_space_id=filespace, &
+                        xfer_prp=s%xfer)
       else
-        dummy = 0
-        call h5dwrite_f(dset, type_id, dummy, shape(dummy, hsize_t), hdferr, &
-                        mem_space_id=memspace, file_space_id=filespace, xfer_prp=s%xfer)
+        call h5dwrite_f(dset, type_id, c_loc(dummy), hdferr, mem_space_id=memspace, file_space_id=filespace, &
+                        xfer_prp=s%xfer)
       end if
       call h5check(hdferr, 'write dataset /'//name, s)
     end if
     call close_slab(s, name, dset, filespace, memspace)
-  end subroutine write_int_1d
+  end subroutine write_buffer
 end module hdf5_output

@@ -2,6 +2,7 @@
 !> peak memory of the ranks.
 module report
   use kinds, only: dp, i8, MPI_INT_I8
+  use proc_status, only: proc_status_bytes
   use timers, only: timer_stat_t
   use logger, only: log_is_root, log_unit
   use json_writer, only: json_writer_t
@@ -9,7 +10,7 @@ module report
   implicit none
   private
 
-  public :: print_timing_table, timings_json, peak_rss_bytes, memory_json, blas_json
+  public :: print_timing_table, timings_json, memory_json, blas_json
 
 contains
 
@@ -74,29 +75,6 @@ contains
     json = w%text()
   end function timings_json
 
-  !> Peak resident set size of this process in bytes (VmHWM of
-  !> /proc/self/status), or -1 where that is not available.
-  function peak_rss_bytes() result(bytes)
-    integer(i8) :: bytes
-    character(len=256) :: line
-    integer :: u, status, colon
-    integer(i8) :: kib
-
-    bytes = -1
-    open (newunit=u, file='/proc/self/status', status='old', action='read', iostat=status)
-    if (status /= 0) return
-    do
-      read (u, '(a)', iostat=status) line
-      if (status /= 0) exit
-      if (line(1:6) /= 'VmHWM:') cycle
-      colon = index(line, ':')
-      read (line(colon+1:), *, iostat=status) kib
-      if (status == 0 .and. index(line, 'kB') > 0) bytes = 1024*kib
-      exit
-    end do
-    close (u)
-  end function peak_rss_bytes
-
   !> {"peak_rss_bytes": {"max": .., "sum": ..}}: the largest peak of one rank
   !> and the sum over the ranks of `comm` (null if some rank cannot tell).
   !> Collective.
@@ -107,7 +85,7 @@ contains
     integer(i8) :: mine, most, least, total
     integer :: ierr
 
-    mine = peak_rss_bytes()
+    mine = proc_status_bytes('VmHWM')     ! peak resident set size
     call MPI_Allreduce(mine, most, 1, MPI_INT_I8, MPI_MAX, comm, ierr)
     call MPI_Allreduce(mine, least, 1, MPI_INT_I8, MPI_MIN, comm, ierr)
     call MPI_Allreduce(max(mine, 0_i8), total, 1, MPI_INT_I8, MPI_SUM, comm, ierr)

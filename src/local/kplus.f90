@@ -30,6 +30,7 @@ module kplus
   use kinds, only: dp, ip, i8
   use errors, only: fatal_error
   use subdomain, only: subdomain_t
+  use sorting, only: sort_ints
   use mumps_wrapper, only: mumps_t
   use metis_wrapper, only: metis_node_nd
   use mpi_f08, only: MPI_COMM_SELF
@@ -354,14 +355,7 @@ contains
 
     nf = size(nodes)
     sorted = nodes
-    do i = 2, nf                       ! insertion sort of at most 12 nodes
-      j = i
-      do while (j > 1)
-        if (sorted(j - 1) <= sorted(j)) exit
-        sorted(j - 1:j) = [sorted(j), sorted(j - 1)]
-        j = j - 1
-      end do
-    end do
+    call sort_ints(sorted)
     allocate (dofs(3*nf))
     do i = 1, nf
       do c = 1, 3

@@ -18,6 +18,7 @@ module decomposition
   use logger, only: log_message
   use params, only: params_t
   use metis_wrapper, only: metis_part_mesh_dual, metis_part_graph_kway
+  use sorting, only: sort_ints
   use box_mesh, only: box_mesh_t, box_mesh_init
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast
   implicit none
@@ -288,26 +289,12 @@ contains
           end do
         end do
       end do
-      call insertion_sort(adjncy(first:nadj))
+      call sort_ints(adjncy(first:nadj))
       xadj(s + 1) = nadj + 1
     end do
     adjncy = adjncy(1:nadj)
   end subroutine subdomain_graph
 
-  pure subroutine insertion_sort(a)
-    integer(ip), intent(inout) :: a(:)
-    integer(ip) :: i, j, v
-    do i = 2, size(a)
-      v = a(i)
-      j = i - 1
-      do while (j >= 1)
-        if (a(j) <= v) exit
-        a(j + 1) = a(j)
-        j = j - 1
-      end do
-      a(j + 1) = v
-    end do
-  end subroutine insertion_sort
 
   !> METIS mapping of subdomains to ranks (rank 0).
   subroutine metis_mapping(dec, rank_of)

@@ -3,7 +3,7 @@
 module feti_test_support
   use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_I8
   use params, only: params_t, default_params
-  use key_sort, only: sort_permutation
+  use sorting, only: sort_permutation
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gather, MPI_Gatherv, MPI_INTEGER
   implicit none
   private

@@ -20,6 +20,7 @@ program bench_subdomain
   use subdomain, only: subdomain_t, build_subdomain
   use assembly, only: assemble_subdomain
   use kplus, only: kplus_t
+  use proc_status, only: proc_status_bytes
   use mpi_f08, only: MPI_Init, MPI_Finalize, MPI_Wtime, MPI_COMM_SELF, MPI_COMM_WORLD, MPI_Comm_rank
   implicit none
   character(len=8), parameter :: orderings(2) = [character(len=8) :: 'metis', 'amd']
@@ -171,11 +172,11 @@ contains
 
     call cube(nel, p, dec, sub)
     allocate (kps(count))
-    rss0 = resident_kib()
+    rss0 = max(proc_status_bytes('VmRSS'), 0_i8)/1024
     do k = 1, count
       call kps(k)%init(sub, 1.0_dp, 'metis')
     end do
-    rss1 = resident_kib()
+    rss1 = max(proc_status_bytes('VmRSS'), 0_i8)/1024
     write (line, '(a,i0,a,i0,a,i0,5a)') 'Memory: ', count, ' live instances of ', nel, &
       '^3 (', sub%ndof, ' dofs, METIS): ', num(real(rss1 - rss0, dp)/count, 1), ' KiB resident each, factors ', &
       num(real(kps(1)%factor_bytes(), dp)/1024, 1), ' KiB of it.'
@@ -228,21 +229,4 @@ contains
     end if
   end function median
 
-  !> VmRSS of this process in KiB (Linux), 0 if unknown.
-  integer(i8) function resident_kib()
-    integer :: unit, ios
-    character(len=256) :: line
-    resident_kib = 0
-    open (newunit=unit, file='/proc/self/status', action='read', iostat=ios)
-    if (ios /= 0) return
-    do
-      read (unit, '(a)', iostat=ios) line
-      if (ios /= 0) exit
-      if (line(1:6) == 'VmRSS:') then
-        read (line(7:), *) resident_kib
-        exit
-      end if
-    end do
-    close (unit)
-  end function resident_kib
 end program bench_subdomain

@@ -1,0 +1,144 @@
+!> Sorting of integer arrays, the one place for it: in place (heapsort,
+!> O(n log n), no recursion) with duplicates removed on request, binary
+!> search in a sorted array, and stable sorting by keys (merge sort)
+!> returning a permutation.
+module sorting
+  use kinds, only: ip, i8
+  implicit none
+  private
+
+  public :: sort_ints, sort_unique, binary_search, sort_permutation
+
+  interface sort_permutation
+    module procedure sort_permutation_i8, sort_permutation_ip
+  end interface sort_permutation
+
+contains
+
+  !> Sort a(:) ascending in place.
+  pure subroutine sort_ints(a)
+    integer(ip), intent(inout) :: a(:)
+    integer(ip) :: n, i, t
+    n = size(a)
+    do i = n/2, 1, -1
+      call sift_down(a, i, n)
+    end do
+    do i = n, 2, -1
+      t = a(1)
+      a(1) = a(i)
+      a(i) = t
+      call sift_down(a, 1, i - 1)
+    end do
+  end subroutine sort_ints
+
+  pure subroutine sift_down(a, first, last)
+    integer(ip), intent(inout) :: a(:)
+    integer(ip), intent(in) :: first, last
+    integer(ip) :: root, child, t
+    root = first
+    do
+      child = 2*root
+      if (child > last) exit
+      if (child < last) then
+        if (a(child + 1) > a(child)) child = child + 1
+      end if
+      if (a(root) >= a(child)) exit
+      t = a(root)
+      a(root) = a(child)
+      a(child) = t
+      root = child
+    end do
+  end subroutine sift_down
+
+  !> Sort a(:) and move its distinct values to a(1:n).
+  pure subroutine sort_unique(a, n)
+    integer(ip), intent(inout) :: a(:)
+    integer(ip), intent(out) :: n
+    integer(ip) :: i
+    n = 0
+    if (size(a) == 0) return
+    call sort_ints(a)
+    n = 1
+    do i = 2, size(a)
+      if (a(i) /= a(n)) then
+        n = n + 1
+        a(n) = a(i)
+      end if
+    end do
+  end subroutine sort_unique
+
+  !> Position of `key` in the ascending array a(:), 0 if absent.
+  pure integer(ip) function binary_search(a, key)
+    integer(ip), intent(in) :: a(:), key
+    integer(ip) :: lo, hi, mid
+    binary_search = 0
+    lo = 1
+    hi = size(a)
+    do while (lo <= hi)
+      mid = (lo + hi)/2
+      if (a(mid) == key) then
+        binary_search = mid
+        return
+      else if (a(mid) < key) then
+        lo = mid + 1
+      else
+        hi = mid - 1
+      end if
+    end do
+  end function binary_search
+
+  !> perm such that keys(perm) is ascending; equal keys keep their order.
+  subroutine sort_permutation_i8(keys, perm)
+    integer(i8), intent(in) :: keys(:)
+    integer(ip), allocatable, intent(out) :: perm(:)
+    integer(ip), allocatable :: work(:)
+    integer(ip) :: n, width, lo, mid, hi, i, j, k
+
+    n = size(keys, kind=ip)
+    allocate (perm(n), work(n))
+    perm = [(i, i = 1, n)]
+    width = 1
+    do while (width < n)
+      lo = 1
+      do while (lo <= n)
+        mid = min(lo + width - 1, n)
+        hi = min(lo + 2*width - 1, n)
+        if (mid < hi) then
+          i = lo
+          j = mid + 1
+          k = lo
+          do while (i <= mid .and. j <= hi)
+            if (keys(perm(j)) < keys(perm(i))) then
+              work(k) = perm(j)
+              j = j + 1
+            else
+              work(k) = perm(i)
+              i = i + 1
+            end if
+            k = k + 1
+          end do
+          do while (i <= mid)
+            work(k) = perm(i)
+            i = i + 1
+            k = k + 1
+          end do
+          do while (j <= hi)
+            work(k) = perm(j)
+            j = j + 1
+            k = k + 1
+          end do
+          perm(lo:hi) = work(lo:hi)
+        end if
+        lo = lo + 2*width
+      end do
+      width = 2*width
+    end do
+  end subroutine sort_permutation_i8
+
+  !> The same for default integer keys.
+  subroutine sort_permutation_ip(keys, perm)
+    integer(ip), intent(in) :: keys(:)
+    integer(ip), allocatable, intent(out) :: perm(:)
+    call sort_permutation_i8(int(keys, i8), perm)
+  end subroutine sort_permutation_ip
+end module sorting
