@@ -28,13 +28,13 @@ contains
     integer(ip) :: n
     character(len=120) :: line
 
-    n = op%con%n_own
-    allocate (lambda(n), r(n), pdir(n), fp(n), w(n), pr(n), alpha(6*op%nlocal))
-    lambda = op%lambda_tilde
-    call op%project(op%d, w)
+    n = op%n_own()
+    allocate (lambda(n), r(n), pdir(n), fp(n), w(n), pr(n), alpha(op%n_coarse()))
+    lambda = op%lambda_tilde_vector()
+    call op%project(op%dual_rhs(), w)
     stop_norm = tol*op%norm(w)
     call op%apply_f(lambda, fp)
-    w = op%d - fp
+    w = op%dual_rhs() - fp
     call op%project(w, r)
     pdir = r
     rr = op%dot(r, r)
@@ -57,9 +57,9 @@ contains
     call log_message(line)
     ! alpha = (G G^T)^{-1} G (F lambda - d)
     call op%apply_f(lambda, fp)
-    w = fp - op%d
+    w = fp - op%dual_rhs()
     deallocate (pr)
-    allocate (pr(6*op%nlocal))
+    allocate (pr(op%n_coarse()))
     call op%apply_g(w, pr)
     call op%coarse_solve(pr, alpha)
   end subroutine pcpg_solve

@@ -12,11 +12,12 @@ module kplus_block
   use subdomain, only: subdomain_t
   use kplus, only: regularized_system
   use mumps_wrapper, only: mumps_t
+  use local_inverse, only: local_inverse_t
   use mpi_f08, only: MPI_COMM_SELF
   implicit none
   private
 
-  type, public :: kplus_block_t
+  type, extends(local_inverse_t), public :: kplus_block_t
     integer(ip) :: nblocks = 0
     integer(ip) :: ndof = 0                    !< sum of the subdomains' dofs
     integer(ip), allocatable :: offset(:)      !< (nblocks+1): dofs of block s are offset(s)+1..offset(s+1)

@@ -69,7 +69,6 @@ module mprgp
   use kinds, only: dp, ip, name_len
   use errors, only: fatal_error
   use logger, only: log_message
-  use params, only: solver_params_t
   use qp_problem, only: qp_problem_t, qp_solver_t, no_lower_bound, compensated_add, qp_status_converged, &
                         qp_status_max_hessian, qp_status_not_finite, qp_status_breakdown, &
                         qp_status_incompatible, qp_status_not_run, qp_message_len
@@ -124,7 +123,6 @@ module mprgp
     real(dp), allocatable, private :: p(:), ap(:), w_phi(:), w_x(:), w_g(:)
   contains
     procedure :: init => mprgp_init
-    procedure :: init_from_params => mprgp_init_from_params
     procedure :: free => mprgp_free
     procedure :: solve => mprgp_solve
     procedure :: is_compatible => mprgp_is_compatible
@@ -181,14 +179,6 @@ contains
       call fatal_error("mprgp: expansion must be 'fixed' or 'optimal', got '"//trim(self%expansion)//"'")
     self%alpha_bar = self%alpha_scale/self%a_norm
   end subroutine mprgp_init
-
-  !> Parameters from &solver (tol, max_hessian, gamma, alpha_scale, expansion, monitor).
-  subroutine mprgp_init_from_params(self, sp, a_norm)
-    class(mprgp_t), intent(inout) :: self
-    type(solver_params_t), intent(in) :: sp
-    real(dp), intent(in) :: a_norm
-    call self%init(a_norm, sp%tol, sp%max_hessian, sp%gamma, sp%alpha_scale, sp%expansion, sp%monitor)
-  end subroutine mprgp_init_from_params
 
   subroutine mprgp_free(self)
     class(mprgp_t), intent(inout) :: self

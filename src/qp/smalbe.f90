@@ -59,10 +59,9 @@
 !> the status message and the totals.
 module smalbe
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
-  use kinds, only: dp, ip
+  use kinds, only: dp, ip, name_len
   use errors, only: fatal_error
   use logger, only: log_message
-  use params, only: solver_params_t
   use qp_problem, only: qp_problem_t, qp_solver_t, qp_message_len, compensated_add, qp_status_converged, &
                         qp_status_max_hessian, qp_status_max_outer, qp_status_not_finite, &
                         qp_status_incompatible, qp_status_not_run
@@ -81,6 +80,21 @@ module smalbe
   contains
     procedure :: test => inner_stop_test
   end type smalbe_inner_stop_t
+
+  !> The settings of SMALBE-M and its inner MPRGP, with the defaults of the
+  !> literature (see smalbe_init for their ranges).
+  type, public :: smalbe_settings_t
+    real(dp) :: tol = 1.0e-6_dp                !< relative tolerance (of ||b||)
+    integer(ip) :: max_outer = 200             !< cap of outer iterations
+    integer(ip) :: max_hessian = 20000         !< cap of Hessian multiplications in total
+    real(dp) :: gamma = 1                      !< MPRGP proportioning parameter
+    real(dp) :: alpha_scale = 1.9_dp           !< MPRGP expansion step alpha_scale/||A||
+    character(len=name_len) :: expansion = 'fixed'  !< 'fixed' | 'optimal'
+    real(dp) :: m_scale = 100                  !< M_0 = m_scale ||A||
+    real(dp) :: beta = 0.5_dp                  !< M <- beta M when the Lagrangian grows too little
+    real(dp) :: eta_scale = 0.1_dp             !< eta = eta_scale ||b||
+    logical :: monitor = .false.               !< one line per outer iteration and a summary
+  end type smalbe_settings_t
 
   !> The SMALBE-M solver with its inner MPRGP. All counters are totals of the
   !> last solve (components, for report.json).
@@ -117,7 +131,7 @@ module smalbe
     type(smalbe_inner_stop_t), private :: rule
   contains
     procedure :: init => smalbe_init
-    procedure :: init_from_params => smalbe_init_from_params
+    procedure :: init_with => smalbe_init_with
     procedure :: free => smalbe_free
     procedure :: solve => smalbe_solve
     procedure :: is_compatible => smalbe_is_compatible
@@ -184,16 +198,14 @@ contains
     if (.not. (self%eta_scale > 0)) call fatal_error('smalbe: eta_scale must be > 0')
   end subroutine smalbe_init
 
-  !> Parameters from &solver: tol, max_outer, max_hessian, gamma, alpha_scale,
-  !> expansion, m_scale, beta, eta_scale, monitor (rho_scale belongs to the
-  !> problem: it sets the penalty in its Hessian).
-  subroutine smalbe_init_from_params(self, sp, a_norm)
+  !> The settings `s` at once, with ||A|| = a_norm (penalty included).
+  subroutine smalbe_init_with(self, s, a_norm)
     class(smalbe_t), intent(inout) :: self
-    type(solver_params_t), intent(in) :: sp
+    type(smalbe_settings_t), intent(in) :: s
     real(dp), intent(in) :: a_norm
-    call self%init(a_norm, sp%tol, sp%max_outer, sp%max_hessian, sp%gamma, sp%alpha_scale, sp%expansion, &
-                   sp%m_scale, sp%beta, sp%eta_scale, sp%monitor)
-  end subroutine smalbe_init_from_params
+    call self%init(a_norm, s%tol, s%max_outer, s%max_hessian, s%gamma, s%alpha_scale, s%expansion, &
+                   s%m_scale, s%beta, s%eta_scale, s%monitor)
+  end subroutine smalbe_init_with
 
   subroutine smalbe_free(self)
     class(smalbe_t), intent(inout) :: self

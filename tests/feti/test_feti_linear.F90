@@ -32,7 +32,8 @@ contains
   subroutine check(p, label)
     type(params_t), intent(in) :: p
     character(len=*), intent(in) :: label
-    type(feti_t) :: op
+    type(feti_t), target :: op
+    type(subdomain_t), pointer :: subs(:)
     real(dp), allocatable :: lambda(:), alpha(:), u_global(:)
     type(local_field_t), allocatable :: u(:)
     integer(ip) :: iterations, ls, a, gid
@@ -42,15 +43,16 @@ contains
     call op%setup(p, MPI_COMM_WORLD)
     call pcpg_solve(op, 1.0e-12_dp, 500_ip, lambda, alpha, iterations, converged)
     call assert_true(converged, label//': PCPG converged', HERE)
-    allocate (u(op%nlocal))
+    allocate (u(op%nlocal()))
     call op%primal(lambda, alpha, u)
 
     call global_solution(p, u_global)
     scale = maxval(abs(u_global))
     mine = 0
-    do ls = 1, op%nlocal
-      do a = 1, op%subs(ls)%nnodes
-        gid = op%subs(ls)%node_gid(a)
+    subs => op%subdomains()
+    do ls = 1, op%nlocal()
+      do a = 1, subs(ls)%nnodes
+        gid = subs(ls)%node_gid(a)
         mine = max(mine, maxval(abs(u(ls)%v(3*a - 2:3*a) - u_global(3*gid - 2:3*gid))))
       end do
     end do

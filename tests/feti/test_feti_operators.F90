@@ -8,7 +8,7 @@ program test_feti_operators
   use kinds, only: dp, ip, i8
   use assertions, only: assert_true, assert_below, assert_equal, test_finish
   use params, only: params_t
-  use feti_operators, only: feti_t, local_field_t
+  use feti_operators, only: feti_t, local_field_t, feti_sizes_t
   use feti_test_support, only: small_case, gather_keyed, coarse_norm
   use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_COMM_SELF, MPI_Comm_rank, MPI_Comm_size, MPI_Gatherv, &
     MPI_Allgather, MPI_INTEGER, MPI_DOUBLE_PRECISION
@@ -34,16 +34,17 @@ contains
     real(dp), allocatable :: x(:), y(:), px(:), ppx(:), fx(:), fy(:), z(:), z2(:)
     type(local_field_t), allocatable :: u(:)
     integer(ip) :: n
+    type(feti_sizes_t) :: sizes
 
     call op%setup(p, MPI_COMM_WORLD)
-    n = op%con%n_own
-    allocate (x(n), y(n), px(n), ppx(n), fx(n), fy(n), z(6*op%nlocal), z2(6*op%nlocal))
+    n = op%n_own()
+    allocate (x(n), y(n), px(n), ppx(n), fx(n), fy(n), z(op%n_coarse()), z2(op%n_coarse()))
 
     ! G lambda~ = e
-    call op%apply_g(op%lambda_tilde, z)
-    call assert_below(coarse_norm(op%comm, z - op%e), 1.0e-12_dp*coarse_norm(op%comm, op%e) + 1.0e-300_dp, &
+    call op%apply_g(op%lambda_tilde_vector(), z)
+    call assert_below(coarse_norm(op%comm(), z - op%rigid_rhs()), 1.0e-12_dp*coarse_norm(op%comm(), op%rigid_rhs()) + 1.0e-300_dp, &
                       label//': G lambda~ = e', HERE)
-    call assert_true(coarse_norm(op%comm, op%e) > 0 .or. p%load%top_pressure == 0, label//': e /= 0', HERE)
+    call assert_true(coarse_norm(op%comm(), op%rigid_rhs()) > 0 .or. p%load%top_pressure == 0, label//': e /= 0', HERE)
 
     ! P^2 = P and G P = 0
     call op%keyed_random(1, x)
@@ -52,7 +53,7 @@ contains
     call assert_below(op%norm(ppx - px), 1.0e-12_dp*op%norm(x), label//': P P x = P x', HERE)
     call op%apply_g(px, z)
     call op%apply_g(x, z2)
-    call assert_below(coarse_norm(op%comm, z), 1.0e-11_dp*coarse_norm(op%comm, z2), label//': G P x = 0', HERE)
+    call assert_below(coarse_norm(op%comm(), z), 1.0e-11_dp*coarse_norm(op%comm(), z2), label//': G P x = 0', HERE)
 
     ! F symmetric and positive semidefinite
     call op%keyed_random(2, y)
@@ -64,14 +65,15 @@ contains
     call assert_below(abs(op%dot(x, fx) - op%dot(x, fx)), 0.0_dp, label//': F deterministic', HERE)
 
     ! B_E B_E^T = I on the equality rows
-    x = merge(0.0_dp, x, op%is_contact)
-    allocate (u(op%nlocal))
+    x = merge(0.0_dp, x, op%is_contact())
+    allocate (u(op%nlocal()))
     call op%apply_bt(x, u)
     call op%apply_b(u, y)
-    y = merge(0.0_dp, y, op%is_contact)
+    y = merge(0.0_dp, y, op%is_contact())
     call assert_below(op%norm(y - x), 1.0e-13_dp*op%norm(x), label//': B_E B_E^T = I', HERE)
 
-    call assert_true(op%con%n_contact_global > 0, label//': has contact rows', HERE)
+    sizes = op%sizes()
+    call assert_true(sizes%contact_rows > 0, label//': has contact rows', HERE)
     call check_full_rank(op, label)
     if (check_rank .and. nranks > 1) call compare_with_one_rank(op, p, label)
     call op%free()
@@ -85,10 +87,12 @@ contains
     type(local_field_t), allocatable :: u(:)
     integer, allocatable :: counts(:), displs(:)
     integer :: j, r, info, ng
-    ng = op%con%n_global
+    type(feti_sizes_t) :: sizes
+    sizes = op%sizes()
+    ng = sizes%dual_dofs
     if (ng > 1500) return
-    allocate (x(op%con%n_own), y(op%con%n_own), u(op%nlocal), counts(nranks), displs(nranks), column(ng))
-    call MPI_Allgather(int(op%con%n_own), 1, MPI_INTEGER, counts, 1, MPI_INTEGER, op%comm, ierr)
+    allocate (x(op%n_own()), y(op%n_own()), u(op%nlocal()), counts(nranks), displs(nranks), column(ng))
+    call MPI_Allgather(int(op%n_own()), 1, MPI_INTEGER, counts, 1, MPI_INTEGER, op%comm(), ierr)
     displs(1) = 0
     do r = 2, nranks
       displs(r) = displs(r - 1) + counts(r - 1)
@@ -96,11 +100,11 @@ contains
     if (rank == 0) allocate (bbt(ng, ng))
     do j = 1, ng
       x = 0
-      if (j > op%con%offset .and. j <= op%con%offset + op%con%n_own) x(j - op%con%offset) = 1
+      if (j > op%row_offset() .and. j <= op%row_offset() + op%n_own()) x(j - op%row_offset()) = 1
       call op%apply_bt(x, u)
       call op%apply_b(u, y)
-      call MPI_Gatherv(y, op%con%n_own, MPI_DOUBLE_PRECISION, column, counts, displs, MPI_DOUBLE_PRECISION, &
-                       0, op%comm, ierr)
+      call MPI_Gatherv(y, op%n_own(), MPI_DOUBLE_PRECISION, column, counts, displs, MPI_DOUBLE_PRECISION, &
+                       0, op%comm(), ierr)
       if (rank == 0) bbt(:, j) = column
     end do
     if (rank == 0) then
@@ -123,13 +127,13 @@ contains
     real(dp), allocatable :: v1(:), v2(:)
     integer :: what
 
-    allocate (x(op%con%n_own), fx(op%con%n_own), px(op%con%n_own))
+    allocate (x(op%n_own()), fx(op%n_own()), px(op%n_own()))
     call op%keyed_random(3, x)
     call op%apply_f(x, fx)
     call op%project(x, px)
     if (rank == 0) then
       call serial%setup(p, MPI_COMM_SELF)
-      allocate (sx(serial%con%n_own), sfx(serial%con%n_own), spx(serial%con%n_own))
+      allocate (sx(serial%n_own()), sfx(serial%n_own()), spx(serial%n_own()))
       call serial%keyed_random(3, sx)
       call serial%apply_f(sx, sfx)
       call serial%project(sx, spx)
@@ -137,17 +141,17 @@ contains
     do what = 1, 4
       select case (what)
       case (1)
-        call gather_keyed(op%comm, op%con%key(1:op%con%n_own), op%d, k1, v1)
-        if (rank == 0) call gather_keyed(MPI_COMM_SELF, serial%con%key(1:serial%con%n_own), serial%d, k2, v2)
+        call gather_keyed(op%comm(), op%row_keys(), op%dual_rhs(), k1, v1)
+        if (rank == 0) call gather_keyed(MPI_COMM_SELF, serial%row_keys(), serial%dual_rhs(), k2, v2)
       case (2)
-        call gather_keyed(op%comm, op%con%key(1:op%con%n_own), op%lambda_tilde, k1, v1)
-        if (rank == 0) call gather_keyed(MPI_COMM_SELF, serial%con%key(1:serial%con%n_own), serial%lambda_tilde, k2, v2)
+        call gather_keyed(op%comm(), op%row_keys(), op%lambda_tilde_vector(), k1, v1)
+        if (rank == 0) call gather_keyed(MPI_COMM_SELF, serial%row_keys(), serial%lambda_tilde_vector(), k2, v2)
       case (3)
-        call gather_keyed(op%comm, op%con%key(1:op%con%n_own), fx, k1, v1)
-        if (rank == 0) call gather_keyed(MPI_COMM_SELF, serial%con%key(1:serial%con%n_own), sfx, k2, v2)
+        call gather_keyed(op%comm(), op%row_keys(), fx, k1, v1)
+        if (rank == 0) call gather_keyed(MPI_COMM_SELF, serial%row_keys(), sfx, k2, v2)
       case (4)
-        call gather_keyed(op%comm, op%con%key(1:op%con%n_own), px, k1, v1)
-        if (rank == 0) call gather_keyed(MPI_COMM_SELF, serial%con%key(1:serial%con%n_own), spx, k2, v2)
+        call gather_keyed(op%comm(), op%row_keys(), px, k1, v1)
+        if (rank == 0) call gather_keyed(MPI_COMM_SELF, serial%row_keys(), spx, k2, v2)
       end select
       if (rank == 0) then
         call assert_true(size(k1) == size(k2), label//': same number of multipliers', HERE)

@@ -9,12 +9,11 @@ program test_qp_smalbe
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use, intrinsic :: ieee_exceptions, only: ieee_set_halting_mode, ieee_get_halting_mode, ieee_invalid
   use kinds, only: dp, ip
-  use params, only: params_t, default_params
   use assertions, only: assert_true, assert_equal, assert_below, test_finish
   use logger, only: logger_init, log_message
   use qp_problem, only: qp_status_converged, qp_status_max_hessian, qp_status_max_outer, &
                         qp_status_incompatible, qp_status_not_finite
-  use smalbe, only: smalbe_t
+  use smalbe, only: smalbe_t, smalbe_settings_t
   use qp_test_problems, only: qp_case_t, make_case, dense_qp_t
   use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_COMM_SELF, MPI_Comm_size
   implicit none
@@ -39,7 +38,7 @@ program test_qp_smalbe
   ! is close to 1 for a random C: the augmented Lagrangian method is then very slow.)
   call check_caps()
   call check_not_finite()
-  call check_from_params()
+  call check_default_settings()
   call check_refusals()
   call test_finish()
 
@@ -178,30 +177,28 @@ contains
     call assert_true(index(solver%message, 'non-finite') > 0, 'NaN Hessian: SMALBE message', HERE)
   end subroutine check_not_finite
 
-  !> init_from_params with the &solver defaults: the documented defaults, and a solve.
-  subroutine check_from_params()
+  !> init_with the default smalbe_settings_t: the literature defaults, and a solve.
+  subroutine check_default_settings()
     type(qp_case_t) :: cs
     type(dense_qp_t) :: dist
     type(smalbe_t) :: solver
-    type(params_t) :: p
+    type(smalbe_settings_t) :: settings
     real(dp), allocatable :: x(:)
-    p = default_params()
-    p%solver%monitor = .false.
     call make_case(cs, 50_ip, 5_ip, 10.0_dp, 15_ip, 0_ip, 10_ip, .false., 24_ip)
     call dist%create(MPI_COMM_WORLD, cs, .true.)
-    call solver%init_from_params(p%solver, cs%a_norm)
+    call solver%init_with(settings, cs%a_norm)
     call assert_true(solver%m_scale == 100 .and. solver%beta == 0.5_dp .and. solver%eta_scale == 0.1_dp .and. &
                      solver%inner%gamma == 1 .and. solver%inner%alpha_scale == 1.9_dp .and. &
-                     solver%inner%expansion == 'fixed', 'init_from_params: literature defaults', HERE)
+                     solver%inner%expansion == 'fixed', 'default settings: literature defaults', HERE)
     allocate (x(dist%n))
     x = 0
     call solver%solve(dist, x)
-    call assert_equal(qp_status_converged, solver%status, 'init_from_params: converged', HERE)
-    call assert_below(solver%gp_norm, p%solver%tol*norm2(cs%b), 'init_from_params: tol ||b|| met', HERE)
+    call assert_equal(qp_status_converged, solver%status, 'default settings: converged', HERE)
+    call assert_below(solver%gp_norm, settings%tol*norm2(cs%b), 'default settings: tol ||b|| met', HERE)
     call assert_true(abs(solver%m_initial - 100*cs%a_norm) <= 1.0e-12_dp*cs%a_norm .and. &
                      abs(solver%eta - 0.1_dp*norm2(cs%b)) <= 1.0e-12_dp*norm2(cs%b), &
-                     'init_from_params: M0 = 100 ||A||, eta = 0.1 ||b||', HERE)
-  end subroutine check_from_params
+                     'default settings: M0 = 100 ||A||, eta = 0.1 ||b||', HERE)
+  end subroutine check_default_settings
 
   !> SMALBE refuses a problem without equality and one with penalty 0.
   subroutine check_refusals()

@@ -30,15 +30,17 @@ program test_reconstruction
   use kinds, only: dp, ip
   use assertions, only: assert_true, assert_below, test_finish
   use logger, only: logger_init
-  use params, only: params_t, solver_params_t
+  use params, only: params_t
   use feti_operators, only: feti_t, local_field_t
   use qp_problem, only: qp_problem_t
   use dual_problem, only: dual_problem_t
   use dual_problem_orth, only: dual_problem_orth_t
-  use smalbe, only: smalbe_t
+  use smalbe, only: smalbe_t, smalbe_settings_t
+  use tfeti_dualization, only: smalbe_settings
   use reconstruction, only: dual_gradient, alpha_new, alpha_orthonormal, alpha_standard, standard_cost_t, &
                             coarse_vector_norm
   use kkt, only: kkt_residuals_t, check_kkt
+  use subdomain, only: subdomain_t
   use feti_test_support, only: small_case
   use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_Comm_rank, MPI_Allreduce, MPI_MAX, MPI_DOUBLE_PRECISION
   implicit none
@@ -94,17 +96,17 @@ contains
 
     kkt_tol = p%reconstruction%kkt_tol
     call op%setup(p, MPI_COMM_WORLD)
-    n = op%con%n_own
-    nc = 6*op%nlocal
+    n = op%n_own()
+    nc = op%n_coarse()
     allocate (nu(n), lambda(n), g(n), a_new(nc), a_std(nc), a_orth(nc), a24(nc), a_wrong(nc))
-    allocate (u_new(op%nlocal), u_std(op%nlocal), u_orth(op%nlocal), u_wrong(op%nlocal))
+    allocate (u_new(op%nlocal()), u_std(op%nlocal()), u_orth(op%nlocal()), u_wrong(op%nlocal()))
 
     ! 1. MUMPS coarse problem, hat multiplier: Eq. 24 against Eq. 10 for a sweep of tol
     call hat%init(op, p%solver%rho_scale)
     do it = 1, size(tols)
       tol = tols(it)
       call solve_dual(p, op, hat, hat%rho, hat%scale, tol, nu, muhat, label)
-      lambda = nu + op%lambda_tilde
+      lambda = nu + op%lambda_tilde_vector()
       call dual_gradient(op, lambda, g)
       call alpha_new(op, g, muhat, a_new)
       call alpha_standard(op, lambda, g, p%reconstruction%active_tol, a_std, cost)
@@ -145,7 +147,7 @@ contains
     call orth%init(op, p%solver%rho_scale)
     call check_orthonormal_operators(op, orth, label)
     call solve_dual(p, op, orth, orth%rho, orth%scale, tol, nu, mu, label//' (cholesky)')
-    lambda = nu + op%lambda_tilde
+    lambda = nu + op%lambda_tilde_vector()
     call dual_gradient(op, lambda, g)
     allocate (at(orth%orth%n), full(orth%orth%n))
     call alpha_orthonormal(orth%orth, g, mu, a_orth, at)
@@ -193,11 +195,11 @@ contains
     real(dp) :: tol, r(3)
     integer(ip) :: k, nref
     call op%setup(p, MPI_COMM_WORLD)
-    allocate (nu(op%con%n_own), lambda(op%con%n_own), g(op%con%n_own), a_new(6*op%nlocal), &
-              a_std(6*op%nlocal), a_ref(6*op%nlocal), u(op%nlocal))
+    allocate (nu(op%n_own()), lambda(op%n_own()), g(op%n_own()), a_new(op%n_coarse()), &
+              a_std(op%n_coarse()), a_ref(op%n_coarse()), u(op%nlocal()))
     call hat%init(op, p%solver%rho_scale)
     call solve_dual(p, op, hat, hat%rho, hat%scale, 1.0e-12_dp, nu, muhat, label)
-    lambda = nu + op%lambda_tilde
+    lambda = nu + op%lambda_tilde_vector()
     call dual_gradient(op, lambda, g)
     call alpha_new(op, g, muhat, a_ref)
     call alpha_standard(op, lambda, g, p%reconstruction%active_tol, a_std, cost)
@@ -210,7 +212,7 @@ contains
     do k = 3, 10
       tol = 10.0_dp**(-k)
       call solve_dual(p, op, hat, hat%rho, hat%scale, tol, nu, muhat, label)
-      lambda = nu + op%lambda_tilde
+      lambda = nu + op%lambda_tilde_vector()
       call dual_gradient(op, lambda, g)
       call alpha_new(op, g, muhat, a_new)
       call alpha_standard(op, lambda, g, p%reconstruction%active_tol, a_std, cost)
@@ -244,11 +246,11 @@ contains
     real(dp), allocatable, intent(inout) :: mu(:)
     character(len=*), intent(in) :: label
     type(smalbe_t) :: solver
-    type(solver_params_t) :: sp
-    sp = p%solver
-    sp%tol = tol
-    sp%monitor = .false.
-    call solver%init_from_params(sp, max(op%norm_pfp, rho)/scale)
+    type(smalbe_settings_t) :: settings
+    settings = smalbe_settings(p%solver)
+    settings%tol = tol
+    settings%monitor = .false.
+    call solver%init_with(settings, max(op%norm_pfp(), rho)/scale)
     nu = 0
     call solver%solve(problem, nu)
     call assert_true(solver%converged(), label//': SMALBE converged: '//trim(solver%message), HERE)
@@ -266,15 +268,15 @@ contains
     real(dp) :: worst
     integer(ip) :: k, n
     n = orth%orth%n
-    allocate (x(op%con%n_own), px(op%con%n_own), ppx(op%con%n_own), qx(op%con%n_own), z(6*op%nlocal), &
-              e(n), y(op%con%n_own), col(n))
+    allocate (x(op%n_own()), px(op%n_own()), ppx(op%n_own()), qx(op%n_own()), z(op%n_coarse()), &
+              e(n), y(op%n_own()), col(n))
     call op%keyed_random(11, x)
     call orth%orth%project(x, px)
     call orth%orth%project(px, ppx)
     call assert_below(op%norm(ppx - px), 1.0e-12_dp*op%norm(x), label//': explicit G~: P P x = P x', HERE)
     call op%apply_g(px, z)
-    call op%apply_g(x, e(1:6*op%nlocal))
-    call assert_below(coarse_vector_norm(op, z), 1.0e-11_dp*coarse_vector_norm(op, e(1:6*op%nlocal)), &
+    call op%apply_g(x, e(1:op%n_coarse()))
+    call assert_below(coarse_vector_norm(op, z), 1.0e-11_dp*coarse_vector_norm(op, e(1:op%n_coarse())), &
                       label//': explicit G~: G P x = 0', HERE)
     call op%project(x, qx)
     call assert_below(op%norm(qx - px), 1.0e-12_dp*op%norm(x), label//': explicit G~: the same P as MUMPS', HERE)
@@ -307,15 +309,17 @@ contains
   !> u_exact = (nu p x/E, nu p y/E, -p z/E) at every node copy.
   real(dp) function block_error(p, op, u)
     type(params_t), intent(in) :: p
-    type(feti_t), intent(in) :: op
+    type(feti_t), intent(inout), target :: op
     type(local_field_t), intent(in) :: u(:)
+    type(subdomain_t), pointer :: subs(:)
     real(dp) :: mine(2), total(2), ex(3), c
     integer(ip) :: ls, a
     c = p%load%top_pressure/p%material%young
     mine = 0
-    do ls = 1, op%nlocal
-      associate (x => op%subs(ls)%coords)
-        do a = 1, op%subs(ls)%nnodes
+    subs => op%subdomains()
+    do ls = 1, op%nlocal()
+      associate (x => subs(ls)%coords)
+        do a = 1, subs(ls)%nnodes
           ex = [p%material%poisson*c*x(1, a), p%material%poisson*c*x(2, a), -c*x(3, a)]
           mine(1) = max(mine(1), maxval(abs(u(ls)%v(3*a - 2:3*a) - ex)))
           mine(2) = max(mine(2), maxval(abs(ex)))

@@ -15,7 +15,7 @@
 !> Norms are over all subdomains and rows of all ranks; 0/0 counts as 0.
 module kkt
   use kinds, only: dp, ip, MPI_REAL_DP
-  use feti_operators, only: feti_t, local_field_t
+  use feti_operators, only: feti_t, local_field_t, feti_sizes_t
   use subdomain, only: subdomain_t
   use mpi_f08, only: MPI_Allreduce, MPI_SUM
   implicit none
@@ -40,22 +40,25 @@ contains
 
   !> Residuals of (u, lambda). Collective.
   function check_kkt(op, u, lambda) result(res)
-    type(feti_t), intent(inout) :: op
+    type(feti_t), intent(inout), target :: op
     type(local_field_t), intent(in) :: u(:)
     real(dp), intent(in) :: lambda(:)
     type(kkt_residuals_t) :: res
     type(local_field_t), allocatable :: btl(:), absu(:)
-    real(dp), allocatable :: ku(:), bu(:), babs(:), r(:)
+    real(dp), allocatable :: ku(:), bu(:), babs(:), r(:), c(:)
+    type(subdomain_t), pointer :: subs(:)
+    type(feti_sizes_t) :: sizes
     real(dp) :: s(17), u_rms2, n_equality, scale_i
     integer(ip) :: ls, n
-    integer :: ierr
 
-    n = op%con%n_own
-    allocate (btl(op%nlocal), absu(op%nlocal), bu(n), babs(n), r(n))
+    n = op%n_own()
+    allocate (btl(op%nlocal()), absu(op%nlocal()), bu(n), babs(n), r(n))
     call op%apply_bt(lambda, btl)
+    subs => op%subdomains()
+    c = op%gap_rhs()
     s = 0
-    do ls = 1, op%nlocal
-      associate (sub => op%subs(ls))
+    do ls = 1, op%nlocal()
+      associate (sub => subs(ls))
         allocate (ku(sub%ndof))
         call sub%K%matvec(u(ls)%v, ku)
         s(1) = s(1) + sum((ku - sub%f + btl(ls)%v)**2)
@@ -70,14 +73,14 @@ contains
       end associate
     end do
     call op%apply_b(u, bu)
-    call apply_abs_b(op, absu, babs)
-    r = bu - op%con%c
-    associate (contact => op%is_contact)
+    call op%apply_abs_b(absu, babs)
+    r = bu - c
+    associate (contact => op%is_contact())
       s(5) = sum(r**2, mask=.not. contact)
-      s(6) = sum(op%con%c**2, mask=.not. contact)
+      s(6) = sum(c**2, mask=.not. contact)
       s(7) = sum(babs**2, mask=.not. contact)
       s(8) = sum(max(r, 0.0_dp)**2, mask=contact)
-      s(9) = sum(op%con%c**2, mask=contact)
+      s(9) = sum(c**2, mask=contact)
       s(10) = sum(babs**2, mask=contact)
       s(11) = sum(min(lambda, 0.0_dp)**2, mask=contact)
       s(12) = sum(lambda**2, mask=contact)
@@ -87,7 +90,8 @@ contains
     call sum_all(op, s)
     res%equilibrium = ratio(sqrt(s(1)), sqrt(max(s(2), s(3), s(4), s(17))))
     u_rms2 = s(14)/max(s(15), 1.0_dp)
-    n_equality = real(op%con%n_global, dp) - s(16)
+    sizes = op%sizes()
+    n_equality = real(sizes%dual_dofs, dp) - s(16)
     res%equality = ratio(sqrt(s(5)), sqrt(max(s(6), s(7), u_rms2*n_equality)))
     scale_i = sqrt(max(s(9), s(10), u_rms2*s(16)))
     res%feasibility = ratio(sqrt(s(8)), scale_i)
@@ -125,26 +129,8 @@ contains
     real(dp), intent(inout) :: s(:)
     real(dp) :: total(size(s))
     integer :: ierr
-    call MPI_Allreduce(s, total, size(s), MPI_REAL_DP, MPI_SUM, op%comm, ierr)
+    call MPI_Allreduce(s, total, size(s), MPI_REAL_DP, MPI_SUM, op%comm(), ierr)
     s = total
   end subroutine sum_all
 
-  !> y = |B| |u|: the size of the terms of each row of B u.
-  subroutine apply_abs_b(op, absu, y)
-    type(feti_t), intent(inout) :: op
-    type(local_field_t), intent(in) :: absu(:)
-    real(dp), intent(inout) :: y(:)
-    real(dp), allocatable :: loc(:)
-    integer(ip) :: ls, e
-    allocate (loc(op%con%n_local))
-    loc = 0
-    do ls = 1, op%nlocal
-      associate (bs => op%con%b(ls))
-        do e = 1, bs%nentries
-          loc(bs%row(e)) = loc(bs%row(e)) + abs(bs%val(e))*absu(ls)%v(bs%dof(e))
-        end do
-      end associate
-    end do
-    call op%con%exchange%scatter_add(loc, y)
-  end subroutine apply_abs_b
 end module kkt

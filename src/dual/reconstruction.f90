@@ -48,7 +48,7 @@ contains
     real(dp), intent(in) :: lambda(:)
     real(dp), intent(out) :: g(:)
     call op%apply_f(lambda, g)
-    g = g - op%d
+    g = g - op%dual_rhs()
   end subroutine dual_gradient
 
   !> alpha_bar = (G G^T)^{-1} G g - muhat (Eq. 14 and 24).
@@ -58,7 +58,7 @@ contains
     real(dp), intent(out) :: alpha_bar(:)
     real(dp), allocatable :: gz(:)
     call timer_start('rec new')
-    allocate (gz(6*op%nlocal))
+    allocate (gz(op%n_coarse()))
     call op%apply_g(g, gz)
     call op%coarse_solve(gz, alpha_bar)
     alpha_bar = alpha_bar - muhat
@@ -94,15 +94,19 @@ contains
     logical, intent(out) :: mask(:)
     integer(ip), intent(out) :: nactive_contact
     real(dp) :: mine, biggest, threshold
+    real(dp), allocatable :: force(:)
+    logical, allocatable :: contact(:)
     integer(ip) :: local
     integer :: ierr
+    contact = op%is_contact()
+    force = op%force_scale()*lambda
     mine = 0
-    if (any(op%is_contact)) mine = maxval(op%con%scale*lambda, mask=op%is_contact)
-    call MPI_Allreduce(mine, biggest, 1, MPI_REAL_DP, MPI_MAX, op%comm, ierr)
+    if (any(contact)) mine = maxval(force, mask=contact)
+    call MPI_Allreduce(mine, biggest, 1, MPI_REAL_DP, MPI_MAX, op%comm(), ierr)
     threshold = active_tol*max(biggest, 0.0_dp)
-    mask = (.not. op%is_contact) .or. (op%con%scale*lambda > threshold .and. lambda > 0)
-    local = count(op%is_contact .and. mask, kind=ip)
-    call MPI_Allreduce(local, nactive_contact, 1, MPI_INT_IP, MPI_SUM, op%comm, ierr)
+    mask = (.not. contact) .or. (force > threshold .and. lambda > 0)
+    local = count(contact .and. mask, kind=ip)
+    call MPI_Allreduce(local, nactive_contact, 1, MPI_INT_IP, MPI_SUM, op%comm(), ierr)
   end subroutine active_contact_mask
 
   !> alpha_bar = (G_A G_A^T)^{-1} G_A g_A (Eq. 10), assembling and factorizing
@@ -119,10 +123,10 @@ contains
     real(dp) :: t0
 
     call timer_start('rec standard')
-    allocate (mask(op%con%n_own), ga(op%con%n_own), gz(6*op%nlocal))
+    allocate (mask(op%n_own()), ga(op%n_own()), gz(op%n_coarse()))
     t0 = MPI_Wtime()
     call active_contact_mask(op, lambda, active_tol, mask, cost%active_rows)
-    call active_cp%init(op%dec, op%con, op%layout, op%comm, mask)
+    call op%init_active_coarse(active_cp, mask)
     cost%factorization = active_cp%seconds_factorization
     cost%assembly = MPI_Wtime() - t0 - cost%factorization
     t0 = MPI_Wtime()
@@ -142,7 +146,7 @@ contains
     real(dp) :: mine
     integer :: ierr
     mine = sum(z**2)
-    call MPI_Allreduce(mine, coarse_vector_norm, 1, MPI_REAL_DP, MPI_SUM, op%comm, ierr)
+    call MPI_Allreduce(mine, coarse_vector_norm, 1, MPI_REAL_DP, MPI_SUM, op%comm(), ierr)
     coarse_vector_norm = sqrt(coarse_vector_norm)
   end function coarse_vector_norm
 end module reconstruction

@@ -48,6 +48,7 @@ module dual_problem
     procedure :: track_step
     procedure :: track_reset
     procedure :: unscaled_multiplier
+    procedure :: hessian_norm
     procedure :: free
   end type dual_problem_t
 
@@ -61,27 +62,28 @@ contains
     integer(ip) :: n
     call this%free()
     this%op => op
-    n = op%con%n_own
-    call this%init_base(op%comm, n)
+    n = op%n_own()
+    call this%init_base(op%comm(), n)
     this%has_equality = .true.
-    this%rho = rho_scale*op%norm_pfp
-    if (.not. (op%norm_pfp > 0 .and. op%norm_pfp < huge(1.0_dp))) &
+    this%rho = rho_scale*op%norm_pfp()
+    if (.not. (op%norm_pfp() > 0 .and. op%norm_pfp() < huge(1.0_dp))) &
       call fatal_error('the norm of the dual operator P F P is not a positive finite number; '// &
                        '&material young (or &mesh lengths) is probably outside what double precision can handle')
     if (.not. this%rho > 0) call fatal_error('dual_problem: &solver rho_scale gives no positive penalty')
-    this%scale = op%norm_pfp
+    this%scale = op%norm_pfp()
     allocate (this%px(n), this%fpx(n), this%pfpx(n))
-    allocate (this%last_g(6*op%nlocal), this%last_z(6*op%nlocal), this%x_g(6*op%nlocal), this%x_z(6*op%nlocal))
+    allocate (this%last_g(op%n_coarse()), this%last_z(op%n_coarse()), this%x_g(op%n_coarse()), &
+              this%x_z(op%n_coarse()))
     this%last_valid = .false.
     this%x_valid = .false.
     this%tracked_residuals = 0
     call this%prepare()
     ! b = P (d - F lambda~)
-    call op%apply_f(op%lambda_tilde, this%fpx)
-    this%fpx = op%d - this%fpx
+    call op%apply_f(op%lambda_tilde_vector(), this%fpx)
+    this%fpx = op%dual_rhs() - this%fpx
     call this%apply_projector(this%fpx, this%b, .false.)
     this%b = this%b/this%scale
-    this%lower = merge(op%lower, no_lower_bound, op%is_contact)
+    this%lower = merge(op%lower_bounds(), no_lower_bound, op%is_contact())
   end subroutine init
 
   !> y = (P F P x + rho Q x)/s, with Q x = x - P x.
@@ -149,6 +151,13 @@ contains
     penalty = self%rho/self%scale
   end function penalty
 
+  !> ||A|| of the scaled QP, for the MPRGP step length: P F P and rho Q act on
+  !> complementary subspaces, so ||A|| = max(||P F P||, rho)/s.
+  real(dp) function hessian_norm(self)
+    class(dual_problem_t), intent(in) :: self
+    hessian_norm = max(self%op%norm_pfp(), self%rho)/self%scale
+  end function hessian_norm
+
   !> muhat of Eq. (8) from the multiplier of the scaled QP.
   function unscaled_multiplier(self, muhat_scaled) result(muhat)
     class(dual_problem_t), intent(in) :: self
@@ -160,7 +169,7 @@ contains
   !> Length of this rank's part of the multiplier: 6 per local subdomain.
   integer(ip) function eq_size(self)
     class(dual_problem_t), intent(in) :: self
-    eq_size = 6*self%op%nlocal
+    eq_size = self%op%n_coarse()
   end function eq_size
 
   !> z = (G G^T)^{-1} G x and cnorm = ||G~ x|| = sqrt((G x)^T z); from the

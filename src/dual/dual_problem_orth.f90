@@ -42,7 +42,7 @@ contains
     class(dual_problem_orth_t), intent(inout) :: this
     character(len=200) :: line
     call timer_start('orthonormal coarse')
-    call this%orth%init(this%op%dec, this%op%con, this%op%layout, this%op%comm)
+    call this%op%init_orthonormal(this%orth)
     call timer_stop('orthonormal coarse')
     write (line, '(a,i0,a,4(es9.2,a))') 'explicit G~ = L^{-1} G: coarse dimension ', this%orth%n, &
       ', assembly ', this%orth%seconds_assembly, ' s, Cholesky ', this%orth%seconds_factorization, &

@@ -1,0 +1,217 @@
+!> The TFETI dualization as one transform (PERMON's QPTDualize in this code's
+!> words): `setup` builds the FETI operators of the subdomain problems and the
+!> dual QP of Eq. (8) that the QP solvers see (class qp_problem_t), and
+!> `post_solve` is its inverse: from the solver's nu and multiplier it forms
+!> lambda = nu + lambda~, unscales the multiplier, computes alpha_bar by the
+!> chosen formula (new: Eq. 24, or Eq. 25 with the explicit G~; standard:
+!> Eq. 10; or both and their difference), u = K^+ (f - B^T lambda) + R alpha_bar
+!> and checks the KKT conditions. The result is a dual_solution_t.
+module tfeti_dualization
+  use kinds, only: dp, name_len, MPI_REAL_DP
+  use logger, only: log_section, log_message
+  use timers, only: timer_start, timer_stop, timer_seconds
+  use params, only: params_t, solver_params_t
+  use feti_operators, only: feti_t, local_field_t, feti_sizes_t
+  use orthonormal_coarse, only: check_orthonormal_size
+  use qp_problem, only: qp_problem_t, qp_solver_t
+  use smalbe, only: smalbe_settings_t
+  use dual_problem, only: dual_problem_t
+  use dual_problem_orth, only: dual_problem_orth_t
+  use reconstruction, only: dual_gradient, alpha_new, alpha_orthonormal, alpha_standard, standard_cost_t, &
+                            coarse_vector_norm
+  use kkt, only: kkt_residuals_t, check_kkt
+  use mpi_f08, only: MPI_Comm, MPI_Comm_size, MPI_Allreduce, MPI_IN_PLACE, MPI_MAX
+  implicit none
+  private
+
+  public :: smalbe_settings
+
+  !> What the inverse step returns: the primal and dual solution and what it
+  !> cost to get u.
+  type, public :: dual_solution_t
+    real(dp), allocatable :: lambda(:)                 !< multipliers (owned rows)
+    real(dp), allocatable :: alpha_bar(:)              !< rigid body amplitudes (local coarse blocks)
+    type(local_field_t), allocatable :: u(:)           !< displacements per local subdomain
+    real(dp) :: alpha_difference = -1                  !< ||alpha_new - alpha_std|| / ||alpha_std|| ('both'), else -1
+    type(standard_cost_t) :: standard_cost             !< parts of the standard formula (if used)
+    type(kkt_residuals_t) :: kkt                       !< the KKT residuals of (u, lambda)
+  end type dual_solution_t
+
+  type, public :: tfeti_dualization_t
+    private
+    type(feti_t) :: op
+    type(dual_problem_t) :: hat                        !< hat form: (G G^T)^{-1} by MUMPS
+    type(dual_problem_orth_t) :: orth                  !< explicit G~ (&solver coarse = 'cholesky')
+    class(dual_problem_t), pointer :: dual => null()   !< the one of the two in use
+    character(len=name_len) :: method = 'both'         !< &reconstruction method
+    real(dp) :: active_tol = 0
+  contains
+    procedure :: setup
+    procedure :: problem
+    procedure :: hessian_norm
+    procedure :: solve
+    procedure :: post_solve
+    procedure :: operators
+    procedure :: sizes
+    procedure :: rho
+    procedure :: free
+  end type tfeti_dualization_t
+
+contains
+
+  !> The SMALBE/MPRGP settings of &solver (rho_scale belongs to the problem).
+  type(smalbe_settings_t) function smalbe_settings(sp) result(s)
+    type(solver_params_t), intent(in) :: sp
+    s = smalbe_settings_t(tol=sp%tol, max_outer=sp%max_outer, max_hessian=sp%max_hessian, gamma=sp%gamma, &
+                          alpha_scale=sp%alpha_scale, expansion=sp%expansion, m_scale=sp%m_scale, &
+                          beta=sp%beta, eta_scale=sp%eta_scale, monitor=sp%monitor)
+  end function smalbe_settings
+
+  !> Build the FETI operators and the dual QP of the case `p` on `comm`.
+  !> `this` must be a target (the dual problem points to its operators).
+  subroutine setup(this, p, comm)
+    class(tfeti_dualization_t), intent(inout), target :: this
+    type(params_t), intent(in) :: p
+    type(MPI_Comm), intent(in) :: comm
+    type(feti_sizes_t) :: n
+    character(len=200) :: line
+    integer :: nranks, ierr
+
+    call this%free()
+    this%method = p%reconstruction%method
+    this%active_tol = p%reconstruction%active_tol
+    if (p%solver%coarse == 'cholesky') call check_orthonormal_size(product(p%mesh%nsub), comm)
+    call this%op%setup(p, comm)
+    call MPI_Comm_size(comm, nranks, ierr)
+    n = this%op%sizes()
+    call log_section('Problem')
+    write (line, '(a,i0,a,i0,a,i0)') 'subdomains ', n%nsubdomains, ', ranks ', nranks, ', primal dofs ', n%primal_dofs
+    call log_message(line)
+    write (line, '(a,i0,a,i0,a,i0,a,i0,a,i0)') 'dual dofs ', n%dual_dofs, ' (gluing ', n%gluing_rows, &
+      ', Dirichlet ', n%dirichlet_rows, ', contact ', n%contact_rows, '), coarse dimension ', n%coarse_dim
+    call log_message(line)
+    call timer_start('dual setup')
+    if (p%solver%coarse == 'cholesky') then
+      this%dual => this%orth
+    else
+      this%dual => this%hat
+    end if
+    call this%dual%init(this%op, p%solver%rho_scale)
+    call timer_stop('dual setup')
+    write (line, '(a,es10.3,a,es10.3)') '||P F P|| ~ ', this%op%norm_pfp(), ', rho = ', this%dual%rho
+    call log_message(line)
+  end subroutine setup
+
+  !> The dual QP for the solver.
+  function problem(this) result(qp)
+    class(tfeti_dualization_t), intent(in) :: this
+    class(qp_problem_t), pointer :: qp
+    qp => this%dual
+  end function problem
+
+  !> ||A|| of the dual QP (see dual_problem%hessian_norm).
+  real(dp) function hessian_norm(this)
+    class(tfeti_dualization_t), intent(in) :: this
+    hessian_norm = this%dual%hessian_norm()
+  end function hessian_norm
+
+  !> Solve the dual QP by `solver` from nu = 0 (timer 'solve'). `seconds`:
+  !> the time of the solve and, within it, of the F actions and of the coarse
+  !> solves (max over ranks).
+  subroutine solve(this, solver, nu, seconds)
+    class(tfeti_dualization_t), intent(inout) :: this
+    class(qp_solver_t), intent(inout) :: solver
+    real(dp), allocatable, intent(out) :: nu(:)
+    real(dp), intent(out) :: seconds(3)            !< solve, F action, coarse solve
+    real(dp) :: before(2)
+    integer :: ierr
+    allocate (nu(this%op%n_own()))
+    nu = 0
+    before = [timer_seconds('F action'), timer_seconds('coarse solve')]
+    call timer_start('solve')
+    call solver%solve(this%dual, nu)
+    call timer_stop('solve')
+    seconds = [timer_seconds('solve'), timer_seconds('F action') - before(1), timer_seconds('coarse solve') - before(2)]
+    call MPI_Allreduce(MPI_IN_PLACE, seconds, 3, MPI_REAL_DP, MPI_MAX, this%op%comm(), ierr)
+  end subroutine solve
+
+  !> The penalty rho of Eq. (8), unscaled.
+  real(dp) function rho(this)
+    class(tfeti_dualization_t), intent(in) :: this
+    rho = this%dual%rho
+  end function rho
+
+  !> The inverse of the dualization: from the solver's minimizer `nu` and its
+  !> multiplier `mu_scaled` (of the scaled QP, hat form or explicit) to
+  !> lambda, alpha_bar, u and the KKT residuals. Collective.
+  subroutine post_solve(this, nu, mu_scaled, sol)
+    class(tfeti_dualization_t), intent(inout) :: this
+    real(dp), intent(in) :: nu(:), mu_scaled(:)
+    type(dual_solution_t), intent(out) :: sol
+    real(dp), allocatable :: g(:), a_new(:), a_std(:)
+    character(len=200) :: line
+
+    call log_section('Reconstruction')
+    sol%lambda = nu + this%op%lambda_tilde_vector()
+    allocate (g(size(nu)), a_new(this%op%n_coarse()), a_std(this%op%n_coarse()), sol%u(this%op%nlocal()))
+    call timer_start('dual gradient')
+    call dual_gradient(this%op, sol%lambda, g)
+    call timer_stop('dual gradient')
+    a_new = 0
+    a_std = 0
+    if (this%method /= 'standard') then
+      select type (d => this%dual)
+      type is (dual_problem_orth_t)
+        call alpha_orthonormal(d%orth, g, d%unscaled_multiplier(mu_scaled), a_new)
+      class default
+        call alpha_new(this%op, g, d%unscaled_multiplier(mu_scaled), a_new)
+      end select
+    end if
+    if (this%method /= 'new') then
+      call alpha_standard(this%op, sol%lambda, g, this%active_tol, a_std, sol%standard_cost)
+      write (line, '(a,3(es10.3,a))') 'standard formula: assembly ', sol%standard_cost%assembly, &
+        ' s, factorization ', sol%standard_cost%factorization, ' s, solve ', sol%standard_cost%solve, ' s'
+      call log_message(line)
+    end if
+    if (this%method == 'both') then
+      sol%alpha_difference = coarse_vector_norm(this%op, a_new - a_std)/ &
+                             max(coarse_vector_norm(this%op, a_std), tiny(1.0_dp))
+      write (line, '(a,es10.3)') '||alpha_new - alpha_standard|| / ||alpha_standard|| = ', sol%alpha_difference
+      call log_message(line)
+    end if
+    sol%alpha_bar = merge(a_std, a_new, this%method == 'standard')
+    call timer_start('primal')
+    call this%op%primal(sol%lambda, sol%alpha_bar, sol%u)
+    call timer_stop('primal')
+
+    call timer_start('kkt')
+    sol%kkt = check_kkt(this%op, sol%u, sol%lambda)
+    call timer_stop('kkt')
+    call log_section('KKT residuals (relative)')
+    write (line, '(5(a,es10.3))') 'equilibrium ', sol%kkt%equilibrium, ', equality ', sol%kkt%equality, &
+      ', feasibility ', sol%kkt%feasibility, ', dual feasibility ', sol%kkt%dual_feasibility, &
+      ', complementarity ', sol%kkt%complementarity
+    call log_message(line)
+  end subroutine post_solve
+
+  !> The FETI operators (for the post-processing and the output); `this`
+  !> must be a target.
+  function operators(this) result(op)
+    class(tfeti_dualization_t), intent(inout), target :: this
+    type(feti_t), pointer :: op
+    op => this%op
+  end function operators
+
+  type(feti_sizes_t) function sizes(this)
+    class(tfeti_dualization_t), intent(in) :: this
+    sizes = this%op%sizes()
+  end function sizes
+
+  subroutine free(this)
+    class(tfeti_dualization_t), intent(inout) :: this
+    call this%hat%free()
+    call this%orth%free()
+    call this%op%free()
+    this%dual => null()
+  end subroutine free
+end module tfeti_dualization
