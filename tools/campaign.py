@@ -682,9 +682,10 @@ def read_kv(path):
 
 
 def squeue_states():
-    """{job id: (STATE, reason)} of this user's jobs that Slurm still knows, or None without squeue."""
+    """{job id: (STATE, reason, submit time, command)} of this user's jobs that Slurm still knows, or None
+    without squeue."""
     try:
-        p = subprocess.run(["squeue", "-h", "-t", "all", "-u", str(os.getuid()), "-o", "%i|%T|%r"],
+        p = subprocess.run(["squeue", "-h", "-t", "all", "-u", str(os.getuid()), "-o", "%i|%T|%r|%V|%o"],
                            capture_output=True, text=True, timeout=60)
     except (OSError, subprocess.SubprocessError) as e:
         print("campaign: squeue failed (%s): states from the exit files only" % e, file=sys.stderr)
@@ -694,9 +695,9 @@ def squeue_states():
         return None
     states = {}
     for line in p.stdout.splitlines():
-        parts = line.strip().split("|")
-        if len(parts) == 3:
-            states[parts[0]] = (parts[1], parts[2])
+        parts = line.strip().split("|", 4)
+        if len(parts) == 5:
+            states[parts[0]] = tuple(parts[1:])
     return states
 
 
@@ -784,8 +785,16 @@ def survey(out, data, states):
     was submitted by hand (it writes $SLURM_JOB_ID into started.txt)."""
     result = []
     for job in data["jobs"]:
+        if not job.get("job_id"):  # a script submitted by hand that has not started yet: squeue's command
+            script = os.path.join(out, job["script"])
+            written = datetime.datetime.fromtimestamp(int(os.path.getmtime(script))).isoformat() \
+                if os.path.exists(script) else "9"
+            ids = [i for i, st in (states or {}).items() if st[3].split(" ")[0] == script and st[2] >= written]
+            if ids:
+                job["job_id"] = max(ids, key=natural_key)
+                job["submitted"] = "by hand"
         outcomes = [run_outcome(os.path.join(out, d), job.get("job_id"), states) for d in job["run_dirs"]]
-        if not job.get("job_id"):
+        if not job.get("job_id"):  # it has started (its started.txt has the id), or has ended
             ids = [o["job_id"] for o in outcomes if o["job_id"]]
             if ids:
                 job["job_id"] = ids[0]
