@@ -12,7 +12,9 @@ Starts a one-node Slurm with tools/local_slurm.sh (its files under DIR/slurm), t
      failed members again and keeps the first attempt's rows;
   C. cancels a running job with scancel: reported cancelled, its row kept;
   D. writes a job script with --dry-run (launcher srun), submits it by hand with sbatch:
-     --collect picks the result up.
+     --collect picks the result up;
+  E. a job that outlives its time limit of 1 minute (a stand-in program that sleeps; it runs
+     alongside C and D) is reported timed out, exit status 124 in its row.
 Always stops the daemons at the end. Exit 77 (CTest SKIP_RETURN_CODE) when Slurm cannot be
 started on this machine (not root, packages not installable); 0 when every check passes.
 """
@@ -127,6 +129,28 @@ def campaign_a(args, common):
           "CSV keeps the first attempt's rows of the failed members (8 rows, got %d)" % len(rows))
 
 
+def submit_timeout(args, common):
+    fake = os.path.join(args.workdir, "sleeper.sh")
+    with open(fake, "w") as f:
+        f.write("#!/bin/sh\n# stands in for feticontact: outlives the time limit\nsleep 600\n")
+    os.chmod(fake, 0o755)
+    out = os.path.join(args.workdir, "timeout")
+    common = [c if c != args.program else fake for c in common]
+    common[common.index("--time") + 1] = "1"
+    rc, stdout, _ = run(CAMPAIGN + common + ["--ranks", "1", "--out", out,
+                                             os.path.join(ROOT, "inputs", "weak", "cube_h4_n8.nml")])
+    check(rc == 0 and "submitted job" in stdout, "submitted a job with a time limit of 1 minute")
+    return out
+
+
+def collect_timeout(out):
+    rc, stdout, _ = run(CAMPAIGN + ["--collect", out, "--wait", "--poll", "2"], timeout=150)
+    check("| timeout | rep1 timeout |" in stdout, "--collect: the job past its time limit is reported timeout")
+    rows = rows_of(out)
+    check(len(rows) == 1 and rows[0]["exit_status"] == "124" and rows[0]["status"] == "timeout",
+          "the timed-out run keeps its row (exit status 124, status timeout)")
+
+
 def campaign_c(args, common):
     out = os.path.join(args.workdir, "cancel")
     rc, stdout, _ = run(CAMPAIGN + common + ["--ranks", "1", "--out", out,
@@ -150,9 +174,9 @@ def campaign_c(args, common):
 
 def by_hand(args, common):
     out = os.path.join(args.workdir, "by_hand")
-    rc, stdout, _ = run(CAMPAIGN + common + ["--ranks", "2", "--launcher", "srun", "--dry-run", "--out", out,
+    rc, stdout, _ = run(CAMPAIGN + common + ["--ranks", "1", "--launcher", "srun", "--dry-run", "--out", out,
                                              os.path.join(ROOT, "inputs", "weak", "cube_h4_n8.nml")])
-    script = os.path.join(out, "runs", "cube_h4_n8", "np2", "job.sh")
+    script = os.path.join(out, "runs", "cube_h4_n8", "np1", "job.sh")
     check(rc == 0 and os.path.exists(script), "--dry-run writes the script")
     with open(script) as f:
         check("srun --mpi=pmix \"$program\"" in f.read(), "launcher srun with the MPI plugin named")
@@ -177,7 +201,7 @@ def main():
     env_dir = os.path.join(args.workdir, "slurm")
     os.environ["FETICONTACT_SLURM_DIR"] = env_dir
     os.environ["SLURM_CONF"] = os.path.join(env_dir, "slurm.conf")
-    for sub in ("weak", "cancel", "by_hand"):
+    for sub in ("weak", "cancel", "by_hand", "timeout"):
         subprocess.run(["rm", "-rf", os.path.join(args.workdir, sub)])
 
     def stop(signum=None, frame=None):
@@ -196,11 +220,14 @@ def main():
             return 1
         common = ["--scheduler", "slurm", "--program", args.program, "--mpi-args=--bind-to none",
                   "--time", "5:00", "--mem-per-rank", "1G"]
-        for part in (campaign_a, campaign_c, by_hand):
-            try:
-                part(args, common)
-            except (OSError, ValueError, KeyError, IndexError, subprocess.SubprocessError) as e:
-                check(False, "%s: %s: %s" % (part.__name__, type(e).__name__, e))
+        try:
+            campaign_a(args, common)
+            timeout_out = submit_timeout(args, common)  # runs alongside C and D (one core each)
+            campaign_c(args, common)
+            by_hand(args, common)
+            collect_timeout(timeout_out)
+        except (OSError, ValueError, KeyError, IndexError, subprocess.SubprocessError) as e:
+            check(False, "%s: %s" % (type(e).__name__, e))
     finally:
         stop()
         rc = subprocess.run([LOCAL_SLURM, "status"], capture_output=True, text=True).returncode
