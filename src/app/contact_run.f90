@@ -194,11 +194,27 @@ contains
     else
       call log_message('feticontact: converged, KKT check passed')
     end if
+    call log_where_to_look(p)
     call problem_hat%free()
     call problem_orth%free()
     call op%free()
 
   contains
+
+    !> Where the output is and how to look at it (a user's first question).
+    subroutine log_where_to_look(p)
+      type(params_t), intent(in) :: p
+      character(len=:), allocatable :: dir
+      dir = trim(p%output%directory)
+      if (p%output%write_hdf5) then
+        call log_message('output: '//dir//'/'//trim(p%output%run_name)//'.xdmf (fields for ParaView; '// &
+                         'its grid "contact" holds the contact pressure and gap)')
+        if (p%obstacle%shape == 'sphere') call log_message('contact pressure against Hertz: '// &
+          '/usr/bin/python3 tools/plots.py hertz '//dir//' --figures '//dir)
+      end if
+      if (p%output%write_report) call log_message('report: '//dir//'/report.json (settings, iterations, '// &
+                                                  'KKT residuals, timings)')
+    end subroutine log_where_to_look
 
     subroutine write_report()
       type(json_writer_t) :: js
