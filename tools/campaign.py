@@ -14,13 +14,29 @@ changed. After every run, DIR/campaign.csv is rewritten with one row per run
 (also failed runs: their exit status is recorded, nothing is dropped), and at
 the end the medians per member are printed as a Markdown table.
 
+With --scheduler slurm the same run folders and merged inputs are written, but each member
+and rank count becomes one sbatch job script (runs/<member>/np<P>/job.sh, its repetitions one
+after the other inside it), submitted unless --dry-run; DIR/jobs.json records the job ids.
+Then --status DIR shows every job and run (pending, running, completed, failed with its exit
+status, timeout, cancelled), --collect DIR [--wait] writes campaign.csv from the finished runs
+(the same columns as a local campaign) and prints the medians, and --resubmit failed --out DIR
+sends the failed and timed-out runs again. Submitting the same campaign twice submits nothing
+that is pending, running or done. Job states come from squeue and the files each job script
+writes into its run folders (started.txt, exit.txt), never from Slurm accounting. See
+docs/CLUSTER.md; tools/local_slurm.sh starts a one-node Slurm for trying it out.
+
 Examples (from the repository root):
     tools/campaign.py --ranks 2 --reps 3 --out output/campaigns/weak_h4 \\
         inputs/weak/cube_h4_n8.nml inputs/weak/cube_h4_n64.nml inputs/weak/cube_h4_n512.nml
     tools/campaign.py --ranks 2 --out output/campaigns/tol_block --set mesh:nel=2,2,2 \\
         --sweep "solver:tol=1e-2,1e-4,1e-6,1e-8,1e-10" inputs/block.nml
+    tools/campaign.py --scheduler slurm --ranks 256 --reps 3 --time 0:30:00 --mem-per-rank 1G \\
+        --partition standard --out /scratch/$USER/paper inputs/weak/cube_h4_n4096.nml
+    tools/campaign.py --status /scratch/$USER/paper
+    tools/campaign.py --collect /scratch/$USER/paper --wait
 
-Exit status: 0 when every run exited 0, 1 when some run failed, 2 on bad arguments.
+Exit status: 0 when every run exited 0, 1 when some run failed, 2 on bad arguments; --collect:
+3 when no run failed but some are not finished.
 Python: /usr/bin/python3 (only the standard library is needed here).
 """
 import argparse
