@@ -1,6 +1,7 @@
 # Run by add_program_test: run feticontact under mpiexec and judge its exit
 # status and output. A run that does not end within TIMEOUT seconds fails
-# (this is how a hang of any rank is caught).
+# (this is how a hang of any rank is caught). With EXPECT_FAIL the status must
+# be non-zero (and equal EXPECT_STATUS when given) and the output must match.
 separate_arguments(args UNIX_COMMAND "${ARGS}")
 execute_process(
   COMMAND ${MPIEXEC} --oversubscribe --bind-to none -n ${NP} ${PROGRAM} ${args} ${INPUT}
@@ -13,6 +14,9 @@ endif()
 if(EXPECT_FAIL)
   if(status EQUAL 0)
     message(FATAL_ERROR "expected a non-zero exit status, got 0")
+  endif()
+  if(EXPECT_STATUS AND NOT status EQUAL EXPECT_STATUS)
+    message(FATAL_ERROR "expected exit status ${EXPECT_STATUS}, got ${status}")
   endif()
   string(REGEX MATCH "${EXPECT_FAIL}" found "${all}")
   if(NOT found)

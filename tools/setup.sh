@@ -27,6 +27,11 @@ install_missing_packages() {
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 export OMPI_MCA_rmaps_base_oversubscribe=1
 export OMPI_MCA_btl_vader_single_copy_mechanism=none
+# One BLAS thread per MPI rank unless the user chose otherwise (the program
+# itself does the same, see FETICONTACT_BLAS_THREADS in docs/INPUT.md; this
+# also covers the test programs that call MUMPS/LAPACK directly).
+export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1}
+export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
 
 setup_build() {
   local dir=$1 type=$2

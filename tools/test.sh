@@ -1,10 +1,22 @@
 #!/usr/bin/env bash
 # Set up everything (Debian packages, a build with runtime checks and floating
 # point traps) and run the whole test suite through CTest.
-#   tools/test.sh [ctest args...]
+#   tools/test.sh [ctest args...]             Debug build in build-debug/ (-fcheck=all, FP traps)
+#   tools/test.sh --release [ctest args...]   Release build in build-release/ (-O3 -march=native):
+#                                             the same tests with FMA, vectorization and the BLAS
+#                                             kernels an optimized build uses (the cluster test,
+#                                             label `cluster`, runs in the Debug pass only)
 set -euo pipefail
 FETICONTACT_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 source "$FETICONTACT_ROOT/tools/setup.sh"
+
+if [ "${1:-}" = "--release" ]; then
+  shift
+  build=${FETICONTACT_TEST_BUILD:-$FETICONTACT_ROOT/build-release}
+  setup_build "$build" Release -DFETICONTACT_TESTS=ON
+  cd "$build"
+  exec ctest -j "$(nproc)" --output-on-failure --timeout 900 -LE cluster "$@"
+fi
 
 build=${FETICONTACT_TEST_BUILD:-$FETICONTACT_ROOT/build-debug}
 setup_build "$build" Debug -DFETICONTACT_TESTS=ON

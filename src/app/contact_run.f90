@@ -14,7 +14,7 @@ module contact_run
   use contact_summary, only: contact_summary_t, summarize_contact
   use hdf5_output, only: check_output_directory
   use field_output, only: write_run_fields
-  use run_report, only: write_run_report
+  use run_report, only: write_run_report, log_where_to_look
   use report, only: print_timing_table
   use mpi_f08, only: MPI_Comm, MPI_Barrier
   implicit none
@@ -81,6 +81,7 @@ contains
     else
       call log_message('feticontact: converged, KKT check passed')
     end if
+    call log_where_to_look(p)
     call dual%free()
   end subroutine run_contact_case
 end module contact_run

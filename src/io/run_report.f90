@@ -5,6 +5,7 @@
 module run_report
   use kinds, only: dp, ip, i8, MPI_INT_I8
   use timers, only: timer_stat_t
+  use logger, only: log_message
   use params, only: params_t, params_json
   use feti_operators, only: feti_t, feti_sizes_t
   use qp_problem, only: qp_status_name
@@ -18,7 +19,7 @@ module run_report
   implicit none
   private
 
-  public :: write_run_report
+  public :: write_run_report, log_where_to_look
 
 contains
 
@@ -145,6 +146,21 @@ contains
       end if
     end subroutine add_stat_max
   end subroutine write_run_report
+
+  !> Where the output is and how to look at it (a user's first question).
+  subroutine log_where_to_look(p)
+    type(params_t), intent(in) :: p
+    character(len=:), allocatable :: dir
+    dir = trim(p%output%directory)
+    if (p%output%write_hdf5) then
+      call log_message('output: '//dir//'/'//trim(p%output%run_name)//'.xdmf (fields for ParaView; '// &
+                       'its grid "contact" holds the contact pressure and gap)')
+      if (p%obstacle%shape == 'sphere') call log_message('contact pressure against Hertz: '// &
+        '/usr/bin/python3 tools/plots.py hertz '//dir//' --figures '//dir)
+    end if
+    if (p%output%write_report) call log_message('report: '//dir//'/report.json (settings, iterations, '// &
+                                                'KKT residuals, timings)')
+  end subroutine log_where_to_look
 
   !> The max over ranks of timer `name`, `absent` if there is no such timer.
   real(dp) function stat_max(stats, name, absent)

@@ -1,7 +1,11 @@
 !> A small assertion module for the test programs (pFUnit is not packaged for
 !> Debian). Each failed assertion prints the file, line, what was checked, the
-!> expected and the actual value; `test_finish` prints 'N passed, N failed'
-!> summed over all ranks and exits with status 1 when anything failed.
+!> expected and the actual value; `test_skip` records a check that could not
+!> run here, with its reason. `test_finish` prints 'N passed, N failed,
+!> N skipped' summed over all ranks and exits with status 1 when anything
+!> failed or when no assertion ran at all (a test that checks nothing is a
+!> defect), and with status 77 (CTest's SKIP_RETURN_CODE, see
+!> cmake/FeticontactTesting.cmake) when every check was skipped.
 !> Tests are .F90 files and pass `__FILE__, __LINE__` (see assertions.h: HERE).
 module assertions
   use, intrinsic :: iso_fortran_env, only: error_unit, output_unit
@@ -10,9 +14,12 @@ module assertions
   implicit none
   private
 
-  public :: assert_true, assert_equal, assert_close, assert_below, test_finish, test_failures
+  public :: assert_true, assert_equal, assert_close, assert_below, test_skip, test_finish, test_failures
 
-  integer :: passed = 0, failed = 0
+  !> Exit status of a test program none of whose checks could run here.
+  integer, parameter, public :: exit_skipped = 77
+
+  integer :: passed = 0, failed = 0, skipped = 0
 
   interface assert_equal
     module procedure assert_equal_int, assert_equal_i8
@@ -78,33 +85,59 @@ contains
                 what, file, line, buf)
   end subroutine assert_close
 
-  !> Assert value <= bound (residuals, errors); NaN fails.
+  !> Assert value <= bound (residuals, errors); NaN fails. With the
+  !> environment variable FETICONTACT_TEST_VERBOSE set, every call prints its
+  !> value, bound and their ratio (to see the margin of a tolerance).
   subroutine assert_below(value, bound, what, file, line)
     real(dp), intent(in) :: value, bound
     character(len=*), intent(in) :: what, file
     integer, intent(in) :: line
     character(len=120) :: buf
+    integer :: status
+    call get_environment_variable('FETICONTACT_TEST_VERBOSE', status=status)
+    if (status == 0) write (output_unit, '(a,es10.2,a,es10.2,a,es9.2,4a)') 'margin: value ', value, ' bound ', bound, &
+      ' ratio ', value/max(bound, tiny(1.0_dp)), ' : ', trim(what)
     write (buf, '(a,es12.4,a,es12.4)') 'value ', value, ' not <= ', bound
     call report(value <= bound, what, file, line, buf)
   end subroutine assert_below
+
+  !> Record that a check (or a group of checks) did not run here, and why.
+  !> Printed on every rank that skips, counted by test_finish.
+  subroutine test_skip(what, file, line)
+    character(len=*), intent(in) :: what, file
+    integer, intent(in) :: line
+    integer :: rank, ierr
+    skipped = skipped + 1
+    call MPI_Comm_rank(MPI_COMM_WORLD, rank, ierr)
+    write (output_unit, '(a,i0,a,a,a,i0,2a)') 'SKIPPED [rank ', rank, '] ', trim(file), ':', line, ': ', trim(what)
+    flush (output_unit)
+  end subroutine test_skip
 
   !> Failures so far on this rank.
   integer function test_failures()
     test_failures = failed
   end function test_failures
 
-  !> Sum over ranks, print 'N passed, N failed' on rank 0, finalize MPI and
-  !> exit with status 1 if any assertion failed on any rank.
+  !> Sum over ranks, print 'N passed, N failed, N skipped' on rank 0, finalize
+  !> MPI and exit with status 1 if any assertion failed on any rank or if no
+  !> assertion ran at all, with exit_skipped if only skipped checks were met.
   subroutine test_finish()
-    integer :: counts(2), total(2), rank, ierr
-    counts = [passed, failed]
-    call MPI_Allreduce(counts, total, 2, MPI_INTEGER, MPI_SUM, MPI_COMM_WORLD, ierr)
+    integer :: counts(3), total(3), rank, ierr
+    counts = [passed, failed, skipped]
+    call MPI_Allreduce(counts, total, 3, MPI_INTEGER, MPI_SUM, MPI_COMM_WORLD, ierr)
     call MPI_Comm_rank(MPI_COMM_WORLD, rank, ierr)
     if (rank == 0) then
-      write (output_unit, '(i0,a,i0,a)') total(1), ' passed, ', total(2), ' failed'
+      write (output_unit, '(i0,a,i0,a,i0,a)') total(1), ' passed, ', total(2), ' failed, ', total(3), ' skipped'
+      if (total(1) + total(2) == 0 .and. total(3) == 0) &
+        write (error_unit, '(a)') 'FAIL: no assertion ran (a test that checks nothing cannot pass)'
       flush (output_unit)
+      flush (error_unit)
     end if
     call MPI_Finalize(ierr)
     if (total(2) > 0) error stop 1
+    if (total(1) + total(2) == 0) then
+      if (total(3) > 0) error stop exit_skipped
+      error stop 1
+    end if
   end subroutine test_finish
 end module assertions

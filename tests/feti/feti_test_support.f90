@@ -1,14 +1,19 @@
-!> Helpers shared by the FETI tests: parameter sets for small cases, and
-!> comparison of distributed dual vectors by their rank-independent keys.
+!> Helpers shared by the FETI tests: parameter sets for small cases,
+!> comparison of distributed dual vectors by their rank-independent keys, and
+!> condition estimates of K_reg and G G^T from which the tests derive their
+!> tolerances (tests/common/tolerances.f90).
 module feti_test_support
   use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_I8
   use params, only: params_t, default_params
   use sorting, only: sort_permutation
-  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gather, MPI_Gatherv, MPI_INTEGER
+  use feti_operators, only: feti_t
+  use subdomain, only: subdomain_t
+  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gather, MPI_Gatherv, MPI_INTEGER, MPI_Allreduce, &
+    MPI_SUM
   implicit none
   private
 
-  public :: small_case, gather_keyed, coarse_norm
+  public :: small_case, gather_keyed, coarse_norm, kplus_condition, coarse_condition
 
 contains
 
@@ -82,7 +87,6 @@ contains
 
   !> Global 2-norm of a vector of local coarse blocks.
   real(dp) function coarse_norm(comm, z)
-    use mpi_f08, only: MPI_Allreduce, MPI_SUM
     type(MPI_Comm), intent(in) :: comm
     real(dp), intent(in) :: z(:)
     real(dp) :: mine, total
@@ -91,4 +95,93 @@ contains
     call MPI_Allreduce(mine, total, 1, MPI_REAL_DP, MPI_SUM, comm, ierr)
     coarse_norm = sqrt(total)
   end function coarse_norm
+
+  !> Largest cond(K_reg) over all subdomains, estimated as 2 lambda_max(K)
+  !> lambda_max(K^+) by 30 power iterations each on the concatenated local
+  !> vectors (an underestimate of the largest one by a factor of a few at most).
+  real(dp) function kplus_condition(op) result(cond)
+    type(feti_t), intent(inout), target :: op
+    type(subdomain_t), pointer :: subs(:)
+    real(dp), allocatable :: v(:), w(:)
+    integer(ip), allocatable :: offset(:)
+    real(dp) :: lmax(2), mine
+    integer(ip) :: i, ls, n
+    integer :: it, ierr
+    subs => op%subdomains()
+    allocate (offset(size(subs) + 1))
+    offset(1) = 0
+    do ls = 1, size(subs, kind=ip)
+      offset(ls + 1) = offset(ls) + subs(ls)%ndof
+    end do
+    n = offset(size(subs) + 1)
+    allocate (v(n), w(n))
+    do i = 1, n
+      v(i) = 1 + 0.3_dp*sin(2.1_dp*i)
+    end do
+    lmax = 0
+    do it = 1, 30
+      call normalize(v)
+      do ls = 1, op%nlocal()
+        call subs(ls)%K%matvec(v(offset(ls) + 1:offset(ls + 1)), w(offset(ls) + 1:offset(ls + 1)))
+      end do
+      mine = sum(w**2)
+      call MPI_Allreduce(mine, lmax(1), 1, MPI_REAL_DP, MPI_SUM, op%comm(), ierr)
+      lmax(1) = sqrt(lmax(1))
+      v = w
+    end do
+    do i = 1, n
+      v(i) = 1 + 0.3_dp*cos(1.3_dp*i)
+    end do
+    do it = 1, 30
+      call normalize(v)
+      w = v
+      call op%local_solve(w)
+      mine = sum(w**2)
+      call MPI_Allreduce(mine, lmax(2), 1, MPI_REAL_DP, MPI_SUM, op%comm(), ierr)
+      lmax(2) = sqrt(lmax(2))
+      v = w
+    end do
+    cond = 2*lmax(1)*lmax(2)
+  contains
+    subroutine normalize(x)
+      real(dp), intent(inout) :: x(:)
+      real(dp) :: local, total
+      local = sum(x**2)
+      call MPI_Allreduce(local, total, 1, MPI_REAL_DP, MPI_SUM, op%comm(), ierr)
+      x = x/sqrt(total)
+    end subroutine normalize
+  end function kplus_condition
+
+  !> cond(G G^T) = lambda_max(G G^T) lambda_max((G G^T)^{-1}), each by 30
+  !> power iterations (G G^T applied as G (G^T z), the inverse by the coarse
+  !> solve), times 2 for the underestimate of power iterations.
+  real(dp) function coarse_condition(op) result(cond)
+    type(feti_t), intent(inout) :: op
+    real(dp), allocatable :: z(:), w(:), y(:)
+    real(dp) :: lmax(2)
+    integer(ip) :: i
+    integer :: it
+    allocate (z(op%n_coarse()), w(op%n_coarse()), y(op%n_own()))
+    do i = 1, size(z)
+      z(i) = 1 + 0.3_dp*sin(1.7_dp*i)
+    end do
+    lmax = 0
+    do it = 1, 30
+      z = z/coarse_norm(op%comm(), z)
+      call op%apply_gt(z, y)
+      call op%apply_g(y, w)
+      lmax(1) = coarse_norm(op%comm(), w)
+      z = w
+    end do
+    do i = 1, size(z)
+      z(i) = 1 + 0.3_dp*cos(0.9_dp*i)
+    end do
+    do it = 1, 30
+      z = z/coarse_norm(op%comm(), z)
+      call op%coarse_solve(z, w)
+      lmax(2) = coarse_norm(op%comm(), w)
+      z = w
+    end do
+    cond = 2*lmax(1)*lmax(2)
+  end function coarse_condition
 end module feti_test_support

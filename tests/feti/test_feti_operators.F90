@@ -6,10 +6,11 @@
 !> of ranks as on one rank.
 program test_feti_operators
   use kinds, only: dp, ip, i8
-  use assertions, only: assert_true, assert_below, assert_equal, test_finish
+  use assertions, only: assert_true, assert_below, assert_equal, test_skip, test_finish
   use params, only: params_t
   use feti_operators, only: feti_t, local_field_t, feti_sizes_t
-  use feti_test_support, only: small_case, gather_keyed, coarse_norm
+  use feti_test_support, only: small_case, gather_keyed, coarse_norm, kplus_condition, coarse_condition
+  use tolerances, only: solve_tol, reorder_tol
   use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_COMM_SELF, MPI_Comm_rank, MPI_Comm_size, MPI_Gatherv, &
     MPI_Allgather, MPI_INTEGER, MPI_DOUBLE_PRECISION
   implicit none
@@ -35,14 +36,22 @@ contains
     type(local_field_t), allocatable :: u(:)
     integer(ip) :: n
     type(feti_sizes_t) :: sizes
+    real(dp) :: tol_k, tol_gg
+    character(len=120) :: buf
 
     call op%setup(p, MPI_COMM_WORLD)
     n = op%n_own()
     allocate (x(n), y(n), px(n), ppx(n), fx(n), fy(n), z(op%n_coarse()), z2(op%n_coarse()))
+    ! What goes through K^+ is exact to c eps cond(K_reg), what goes through
+    ! the coarse solve to c eps cond(G G^T) (tests/common/tolerances.f90).
+    tol_k = solve_tol(kplus_condition(op))
+    tol_gg = solve_tol(coarse_condition(op))
+    write (buf, '(2a,2es10.2)') label, ': tolerances from cond(K_reg), cond(G G^T):', tol_k, tol_gg
+    if (rank == 0) write (*, '(a)') trim(buf)
 
-    ! G lambda~ = e
+    ! G lambda~ = e: the residual of one coarse solve
     call op%apply_g(op%lambda_tilde_vector(), z)
-    call assert_below(coarse_norm(op%comm(), z - op%rigid_rhs()), 1.0e-12_dp*coarse_norm(op%comm(), op%rigid_rhs()) + 1.0e-300_dp, &
+    call assert_below(coarse_norm(op%comm(), z - op%rigid_rhs()), tol_gg*coarse_norm(op%comm(), op%rigid_rhs()) + tiny(1.0_dp), &
                       label//': G lambda~ = e', HERE)
     call assert_true(coarse_norm(op%comm(), op%rigid_rhs()) > 0 .or. p%load%top_pressure == 0, label//': e /= 0', HERE)
 
@@ -50,19 +59,24 @@ contains
     call op%keyed_random(1, x)
     call op%project(x, px)
     call op%project(px, ppx)
-    call assert_below(op%norm(ppx - px), 1.0e-12_dp*op%norm(x), label//': P P x = P x', HERE)
+    ! P P x - P x and G P x are (images of) the residual of a coarse solve
+    call assert_below(op%norm(ppx - px), tol_gg*op%norm(x), label//': P P x = P x', HERE)
     call op%apply_g(px, z)
     call op%apply_g(x, z2)
-    call assert_below(coarse_norm(op%comm(), z), 1.0e-11_dp*coarse_norm(op%comm(), z2), label//': G P x = 0', HERE)
+    call assert_below(coarse_norm(op%comm(), z), tol_gg*coarse_norm(op%comm(), z2), label//': G P x = 0', HERE)
 
     ! F symmetric and positive semidefinite
     call op%keyed_random(2, y)
     call op%apply_f(x, fx)
     call op%apply_f(y, fy)
-    call assert_below(abs(op%dot(x, fy) - op%dot(y, fx)), 1.0e-12_dp*op%norm(x)*op%norm(fy), &
+    ! F is symmetric PSD in exact arithmetic; K^+ solves perturb it by c eps cond(K_reg)
+    call assert_below(abs(op%dot(x, fy) - op%dot(y, fx)), tol_k*op%norm(x)*op%norm(fy), &
                       label//': x.F y = y.F x', HERE)
-    call assert_true(op%dot(x, fx) >= -1.0e-14_dp*op%norm(x)*op%norm(fx), label//': x.F x >= 0', HERE)
-    call assert_below(abs(op%dot(x, fx) - op%dot(x, fx)), 0.0_dp, label//': F deterministic', HERE)
+    call assert_true(op%dot(x, fx) >= -tol_k*op%norm(x)*op%norm(fx), label//': x.F x >= 0', HERE)
+    ! a second application of F to the same x, after F y, gives the same bits
+    ! (no state kept between applications: work arrays, ghost buffers)
+    call op%apply_f(x, px)
+    call assert_true(all(px == fx), label//': F x again after F y gives the same F x', HERE)
 
     ! B_E B_E^T = I on the equality rows
     x = merge(0.0_dp, x, op%is_contact())
@@ -70,7 +84,9 @@ contains
     call op%apply_bt(x, u)
     call op%apply_b(u, y)
     y = merge(0.0_dp, y, op%is_contact())
-    call assert_below(op%norm(y - x), 1.0e-13_dp*op%norm(x), label//': B_E B_E^T = I', HERE)
+    ! each entry of B_E B_E^T x sums at most 8 copies x 8 rows of products of
+    ! rounded Helmert entries: a sum of at most 64 terms of size |x|
+    call assert_below(op%norm(y - x), reorder_tol(64)*op%norm(x), label//': B_E B_E^T = I', HERE)
 
     sizes = op%sizes()
     call assert_true(sizes%contact_rows > 0, label//': has contact rows', HERE)
@@ -90,7 +106,10 @@ contains
     type(feti_sizes_t) :: sizes
     sizes = op%sizes()
     ng = sizes%dual_dofs
-    if (ng > 1500) return
+    if (ng > 1500) then
+      if (rank == 0) call test_skip(label//': full row rank of B (dense B B^T of more than 1500 rows)', HERE)
+      return
+    end if
     allocate (x(op%n_own()), y(op%n_own()), u(op%nlocal()), counts(nranks), displs(nranks), column(ng))
     call MPI_Allgather(int(op%n_own()), 1, MPI_INTEGER, counts, 1, MPI_INTEGER, op%comm(), ierr)
     displs(1) = 0
@@ -126,7 +145,14 @@ contains
     integer(i8), allocatable :: k1(:), k2(:)
     real(dp), allocatable :: v1(:), v2(:)
     integer :: what
+    real(dp) :: tol(4)
 
+    ! d and F x go through K^+ (another factorization on one rank: block
+    ! diagonal of other subdomains), lambda~ and P x through the coarse solve
+    tol(1) = solve_tol(kplus_condition(op))
+    tol(2) = solve_tol(coarse_condition(op))
+    tol(3) = tol(1)
+    tol(4) = tol(2)
     allocate (x(op%n_own()), fx(op%n_own()), px(op%n_own()))
     call op%keyed_random(3, x)
     call op%apply_f(x, fx)
@@ -157,7 +183,7 @@ contains
         call assert_true(size(k1) == size(k2), label//': same number of multipliers', HERE)
         if (size(k1) == size(k2)) then
           call assert_true(all(k1 == k2), label//': same multiplier keys', HERE)
-          call assert_below(maxval(abs(v1 - v2)), 1.0e-12_dp*maxval(abs(v2)) + 1.0e-300_dp, &
+          call assert_below(maxval(abs(v1 - v2)), tol(what)*maxval(abs(v2)) + tiny(1.0_dp), &
                             label//': same values on 1 and N ranks', HERE)
         end if
       end if

@@ -7,6 +7,7 @@
 program test_mumps_instances
   use, intrinsic :: iso_fortran_env, only: output_unit
   use kinds, only: dp, ip
+  use tolerances, only: solve_tol
   use assertions, only: assert_true, assert_below, test_finish
   use mumps_wrapper, only: mumps_t
   use mpi_f08, only: MPI_Init, MPI_COMM_SELF, MPI_COMM_WORLD, MPI_Comm_rank, MPI_Wtime
@@ -42,7 +43,9 @@ program test_mumps_instances
   ! ~6 KiB per instance, then flat); a leak would grow it again in round 3.
   call one_round(count, rss0, rss1, rss2, t0, t1, t2, t3, worst)
   live = rss1 - rss0
-  call assert_below(worst, 1.0e-12_dp, 'every instance solves its own system', HERE)
+  ! tridiagonal (-1, 2.5, -1): eigenvalues in (0.5, 4.5), cond < 9; a
+  ! backward-stable solve is exact to c eps cond
+  call assert_below(worst, solve_tol(9.0_dp), 'every instance solves its own system', HERE)
   if (rank == 0) then
     write (output_unit, '(a,i0,a)') 'instances: ', count, ' (n = 24 each, all alive at once)'
     write (output_unit, '(a,f8.1,a)') 'resident memory per live instance: ', real(rss1 - rss0, dp)/count, ' KiB'
@@ -54,11 +57,12 @@ program test_mumps_instances
   first_peak = rss1
   first_after = rss2
   call one_round(count, rss0, rss1, rss2, t0, t1, t2, t3, worst)
-  call assert_below(worst, 1.0e-12_dp, 'every instance solves its own system, third round', HERE)
+  call assert_below(worst, solve_tol(9.0_dp), 'every instance solves its own system, third round', HERE)
   if (rank == 0) then
     write (output_unit, '(a,i0,a)') 'third round: peak ', rss1 - first_peak, ' KiB above the peak of the second'
     write (output_unit, '(a,i0,a)') 'third round: ', rss2 - first_after, ' KiB more left after freeing'
   end if
+  call assert_true(live > 0, 'resident memory is readable (/proc/self/status) and grows with live instances', HERE)
   call assert_true(rss1 - first_peak < max(2048_8, live/20), &
                    'the third round reuses the memory of the second (no leak)', HERE)
   call test_finish()

@@ -11,18 +11,22 @@
 program test_mumps_wrapper
   use kinds, only: dp, ip, i8
   use assertions, only: assert_true, assert_below, test_finish
+  use tolerances, only: solve_tol
   use mumps_wrapper, only: mumps_t
   use metis_wrapper, only: metis_node_nd
   use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_COMM_SELF, MPI_Comm, MPI_Comm_rank, MPI_Comm_size, &
                      MPI_Bcast, MPI_DOUBLE_PRECISION
   implicit none
   integer, parameter :: m = 6, n = m**3, nrhs = 3
-  real(dp), parameter :: tol = 1.0e-12_dp
   integer :: ierr, rank, nranks
+  real(dp) :: tol
 
   call MPI_Init(ierr)
   call MPI_Comm_rank(MPI_COMM_WORLD, rank, ierr)
   call MPI_Comm_size(MPI_COMM_WORLD, nranks, ierr)
+  ! A backward-stable solve is exact to c eps cond; cond of the shifted
+  ! Laplacians is known in closed form (the larger of the two matrices')
+  tol = solve_tol(max(laplacian_condition(0.0_dp), laplacian_condition(3.0_dp)))
 
   ! centralized, one instance per rank
   call check_centralized(MPI_COMM_SELF, .true., 0.0_dp, 'amd', 'self spd amd')
@@ -51,6 +55,27 @@ contains
     integer, intent(in) :: i, j, k
     var = 1 + i + m*(j + m*k)
   end function var
+
+  !> cond of the m^3 Dirichlet Laplacian minus shift*I: its eigenvalues are
+  !> sum over the 3 directions of 2 - 2 cos(k pi/(m+1)), k = 1..m, minus shift.
+  real(dp) function laplacian_condition(shift) result(cond)
+    real(dp), intent(in) :: shift
+    real(dp) :: lam, big, small, h
+    integer :: i, j, k
+    h = acos(-1.0_dp)/(m + 1)
+    big = 0
+    small = huge(1.0_dp)
+    do k = 1, m
+      do j = 1, m
+        do i = 1, m
+          lam = 6 - 2*(cos(i*h) + cos(j*h) + cos(k*h)) - shift
+          big = max(big, abs(lam))
+          small = min(small, abs(lam))
+        end do
+      end do
+    end do
+    cond = big/small
+  end function laplacian_condition
 
   !> Upper triangle of the Dirichlet Laplacian minus shift*I, one entry per
   !> position (row <= column).

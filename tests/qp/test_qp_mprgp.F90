@@ -14,6 +14,7 @@ program test_qp_mprgp
   use qp_problem, only: qp_status_converged, qp_status_max_hessian, qp_status_incompatible, &
                         qp_status_not_finite
   use mprgp, only: mprgp_t
+  use tolerances, only: drift_tol
   use qp_test_problems, only: qp_case_t, make_case, dense_qp_t
   use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_COMM_SELF, MPI_Comm_size
   implicit none
@@ -47,6 +48,7 @@ contains
     type(mprgp_t) :: s_solver, d_solver
     real(dp), allocatable :: xs(:), xd(:), x_full(:), g_full(:)
     character(len=300) :: buf
+    logical :: identical
 
     call make_case(cs, n, 0_ip, cond, n_active, n_degenerate, n_unbounded, .false., seed)
     call serial%create(MPI_COMM_SELF, cs, .false.)
@@ -65,11 +67,18 @@ contains
     call dist%gather(xd, x_full)
     call dist%gather(d_solver%gradient, g_full)
     call check_solution(name//' (distributed)', cs, x_full, g_full, d_solver, tol)
-    call assert_true(all(x_full == xs), name//': distributed x identical to serial x', HERE)
-    call assert_equal(s_solver%n_hessian, d_solver%n_hessian, name//': same Hessian count serial/distributed', HERE)
-    call assert_equal(s_solver%n_cg, d_solver%n_cg, name//': same CG steps', HERE)
-    call assert_equal(s_solver%n_expansion, d_solver%n_expansion, name//': same expansion steps', HERE)
-    call assert_equal(s_solver%n_proportioning, d_solver%n_proportioning, name//': same proportioning steps', HERE)
+    ! The distributed run differs from the serial one only by the rounding of
+    ! the Hessian rows and reductions (the reductions are compensated, so the
+    ! iterates are usually the same bits): each of k steps moves x by at most
+    ! eps cond(A) |x|, so |x_dist - x_serial| <= drift_tol(k, cond |x*|).
+    call assert_below(norm2(x_full - xs), drift_tol(int(s_solver%n_hessian), cond*norm2(cs%x_star)), &
+                      name//': distributed x = serial x', HERE)
+    identical = all(x_full == xs)
+    call same_count(s_solver%n_hessian, d_solver%n_hessian, identical, name//': Hessian count serial/distributed', HERE)
+    call same_count(s_solver%n_cg, d_solver%n_cg, identical, name//': CG steps', HERE)
+    call same_count(s_solver%n_expansion, d_solver%n_expansion, identical, name//': expansion steps', HERE)
+    call same_count(s_solver%n_proportioning, d_solver%n_proportioning, identical, name//': proportioning steps', &
+                    HERE)
     call assert_equal(dist%n_hessian_calls, d_solver%n_hessian, name//': Hessian calls counted', HERE)
     write (buf, '(a,i0,3a,i0,a,i0,a,i0,a,i0,a,i0,a,es9.2)') 'np ', nranks, ' MPRGP ', name, ': iterations ', &
       d_solver%n_iterations, ' (cg ', d_solver%n_cg, ', exp ', d_solver%n_expansion, ', prop ', &
@@ -78,16 +87,35 @@ contains
     call log_message(buf)
   end subroutine check_case
 
+  !> Step counts of the serial and the distributed run: equal when the
+  !> iterates are the same bits; otherwise a rounding difference may move one
+  !> decision (a step type, the stopping iteration), so they may differ by
+  !> 10% + 2 (more would mean another algorithm, not another rounding).
+  subroutine same_count(serial, distributed, identical, what, file, line)
+    integer(ip), intent(in) :: serial, distributed
+    logical, intent(in) :: identical
+    character(len=*), intent(in) :: what, file
+    integer, intent(in) :: line
+    if (identical) then
+      call assert_equal(serial, distributed, what//' (identical iterates)', file, line)
+    else
+      call assert_true(abs(serial - distributed) <= 2 + serial/10, what//' (iterates differ by rounding)', file, line)
+    end if
+  end subroutine same_count
+
   !> ||x - x*|| <= 1e-8 ||x*||, x >= l, and the KKT conditions recomputed
   !> from the dense data: ||g^P(x)|| <= tol ||b|| (the stopping test, up to
-  !> round-off in the recursively updated gradient) and g close to s*.
+  !> the round-off that the recursively updated gradient gathers over the
+  !> solver's k Hessian products, drift_tol(k, ||A|| ||x|| + ||b||)) and g
+  !> close to s*.
   subroutine check_solution(name, cs, x, gradient, solver, tol)
     character(len=*), intent(in) :: name
     type(qp_case_t), intent(in) :: cs
     real(dp), intent(in) :: x(:), gradient(:), tol
     type(mprgp_t), intent(in) :: solver
-    real(dp) :: g(cs%n), gp(cs%n)
+    real(dp) :: g(cs%n), gp(cs%n), floor
     integer :: i
+    floor = drift_tol(int(solver%n_hessian), cs%a_norm*norm2(x) + norm2(cs%b))
     call assert_below(norm2(x - cs%x_star), 1.0e-8_dp*norm2(cs%x_star), name//': ||x - x*|| <= 1e-8 ||x*||', HERE)
     call assert_true(all(x >= cs%lower), name//': x >= l', HERE)
     g = matmul(cs%a, x) - cs%b
@@ -95,11 +123,11 @@ contains
       gp(i) = g(i)
       if (x(i) <= cs%lower(i)) gp(i) = min(g(i), 0.0_dp)
     end do
-    call assert_below(norm2(gp), 10*tol*norm2(cs%b), name//': ||g^P|| from the dense data', HERE)
-    call assert_below(abs(solver%gp_norm - norm2(gp)), 1.0e-12_dp*norm2(cs%b) + 0.5_dp*norm2(gp), &
+    call assert_below(norm2(gp), 10*tol*norm2(cs%b) + floor, name//': ||g^P|| from the dense data', HERE)
+    call assert_below(abs(solver%gp_norm - norm2(gp)), floor + 0.5_dp*norm2(gp), &
                       name//': reported ||g^P|| matches', HERE)
     call assert_below(norm2(g - cs%s_star), 1.0e-6_dp*norm2(cs%b), name//': gradient = multipliers s*', HERE)
-    call assert_below(norm2(gradient - g), 1.0e-12_dp*norm2(cs%b), name//': returned gradient = A x - b', HERE)
+    call assert_below(norm2(gradient - g), floor, name//': returned gradient = A x - b', HERE)
   end subroutine check_solution
 
   !> max_hessian = 3 on a problem that needs many more: not converged, and
