@@ -1,0 +1,327 @@
+!> B, the signed Boolean gluing / Dirichlet / contact matrix of TFETI, and
+!> G = R^T B^T, whose entries are stored with B's (G^T = B R, built with B
+!> in build_constraints). The rows are distributed: each rank owns n_own of
+!> them and holds ghost copies of the rows its subdomains touch (dual_exchange).
+!>
+!> Dual vectors: the rows this rank owns (length n_own). Primal vectors: one
+!> local_field_t per local subdomain, or the concatenated vector of the
+!> rank's subdomains (`concat`, subdomain s at offset(s)+1..offset(s+1)).
+!> Coarse vectors: the 6-blocks of the local subdomains.
+module b_operator
+  use kinds, only: dp, ip, i8
+  use params, only: params_t
+  use decomposition, only: decomposition_t
+  use subdomain, only: subdomain_t
+  use constraints, only: constraints_t, build_constraints, row_contact
+  implicit none
+  private
+
+  !> One vector per local subdomain (displacements, loads).
+  type, public :: local_field_t
+    real(dp), allocatable :: v(:)
+  end type local_field_t
+
+  type, public :: b_operator_t
+    private
+    type(constraints_t) :: con                  !< B, c, G^T = B R, the exchange pattern
+    integer(ip) :: nlocal = 0                   !< subdomains of this rank
+    integer(ip), allocatable :: offset(:)       !< (nlocal+1) dof offsets in concatenated vectors
+    real(dp), allocatable :: wloc(:), wloc2(:), xall(:)   !< work: local rows (twice), concatenated
+  contains
+    procedure :: init
+    procedure :: n_own
+    procedure :: n_concat
+    procedure :: dof_range
+    procedure :: add_transpose
+    procedure :: apply_concat
+    procedure :: apply_b
+    procedure :: apply_bt
+    procedure :: apply_abs_b
+    procedure :: apply_g
+    procedure :: apply_gt
+    procedure :: n_entries
+    procedure :: constraints
+    procedure :: row_counts
+    procedure :: row_keys
+    procedure :: row_offset
+    procedure :: is_contact
+    procedure :: force_scale
+    procedure :: gap_rhs
+    procedure :: row_node_gid
+    procedure :: row_coordinates
+    procedure :: keyed_random
+    procedure :: free
+  end type b_operator_t
+
+contains
+
+  !> Build B, c and G^T = B R of the local subdomains `subs` (which hold
+  !> their geometry and R). Collective over `comm`.
+  subroutine init(this, p, dec, subs, comm)
+    use mpi_f08, only: MPI_Comm
+    class(b_operator_t), intent(inout) :: this
+    type(params_t), intent(in) :: p
+    type(decomposition_t), intent(in) :: dec
+    type(subdomain_t), intent(in) :: subs(:)
+    type(MPI_Comm), intent(in) :: comm
+    integer(ip) :: ls
+    call this%free()
+    call build_constraints(p, dec, subs, comm, this%con)
+    this%nlocal = size(subs, kind=ip)
+    allocate (this%offset(this%nlocal + 1))
+    this%offset(1) = 0
+    do ls = 1, this%nlocal
+      this%offset(ls + 1) = this%offset(ls) + subs(ls)%ndof
+    end do
+    allocate (this%wloc(this%con%n_local), this%wloc2(this%con%n_local), this%xall(this%offset(this%nlocal + 1)))
+  end subroutine init
+
+  !> Rows this rank owns (the length of a dual vector).
+  integer(ip) function n_own(this)
+    class(b_operator_t), intent(in) :: this
+    n_own = this%con%n_own
+  end function n_own
+
+  !> Length of the concatenated primal vector of the local subdomains.
+  integer(ip) function n_concat(this)
+    class(b_operator_t), intent(in) :: this
+    n_concat = this%offset(this%nlocal + 1)
+  end function n_concat
+
+  !> The dofs of local subdomain `ls` in the concatenated vector: first:last.
+  function dof_range(this, ls) result(r)
+    class(b_operator_t), intent(in) :: this
+    integer(ip), intent(in) :: ls
+    integer(ip) :: r(2)
+    r = [this%offset(ls) + 1, this%offset(ls + 1)]
+  end function dof_range
+
+  !> xall += scale * B^T x on the concatenated vector (x: owned rows).
+  subroutine add_transpose(this, x, scale, xall)
+    class(b_operator_t), intent(inout) :: this
+    real(dp), intent(in) :: x(:), scale
+    real(dp), intent(inout) :: xall(:)
+    integer(ip) :: ls, e
+    call this%con%exchange%gather(x, this%wloc)
+    do ls = 1, this%nlocal
+      associate (bs => this%con%b(ls), o => this%offset(ls))
+        do e = 1, bs%nentries
+          xall(o + bs%dof(e)) = xall(o + bs%dof(e)) + scale*bs%val(e)*this%wloc(bs%row(e))
+        end do
+      end associate
+    end do
+  end subroutine add_transpose
+
+  !> y = B xall (owned rows) for the concatenated vector xall.
+  subroutine apply_concat(this, xall, y)
+    class(b_operator_t), intent(inout) :: this
+    real(dp), intent(in) :: xall(:)
+    real(dp), intent(inout) :: y(:)
+    call local_rows(this, xall, .false., this%wloc2)
+    call this%con%exchange%scatter_add(this%wloc2, y)
+  end subroutine apply_concat
+
+  !> y_local = B xall (|B| xall with `absolute`) on the local rows, owned
+  !> and ghosts, before the scatter-add.
+  subroutine local_rows(this, xall, absolute, y_local)
+    class(b_operator_t), intent(in) :: this
+    real(dp), intent(in) :: xall(:)
+    logical, intent(in) :: absolute
+    real(dp), intent(out) :: y_local(:)
+    integer(ip) :: ls, e
+    real(dp) :: v
+    y_local = 0
+    do ls = 1, this%nlocal
+      associate (bs => this%con%b(ls), o => this%offset(ls))
+        do e = 1, bs%nentries
+          v = bs%val(e)
+          if (absolute) v = abs(v)
+          y_local(bs%row(e)) = y_local(bs%row(e)) + v*xall(o + bs%dof(e))
+        end do
+      end associate
+    end do
+  end subroutine local_rows
+
+  !> y = B u = sum over subdomains of B^s u^s (owned rows).
+  subroutine apply_b(this, u, y)
+    class(b_operator_t), intent(inout) :: this
+    type(local_field_t), intent(in) :: u(:)
+    real(dp), intent(inout) :: y(:)
+    integer(ip) :: ls
+    do ls = 1, this%nlocal
+      this%xall(this%offset(ls) + 1:this%offset(ls + 1)) = u(ls)%v
+    end do
+    call this%apply_concat(this%xall, y)
+  end subroutine apply_b
+
+  !> u^s = B^s^T x for every local subdomain.
+  subroutine apply_bt(this, x, u)
+    class(b_operator_t), intent(inout) :: this
+    real(dp), intent(in) :: x(:)
+    type(local_field_t), intent(inout) :: u(:)
+    integer(ip) :: ls
+    this%xall = 0
+    call this%add_transpose(x, 1.0_dp, this%xall)
+    do ls = 1, this%nlocal
+      u(ls)%v = this%xall(this%offset(ls) + 1:this%offset(ls + 1))
+    end do
+  end subroutine apply_bt
+
+  !> y = |B| |u|: the size of the terms of each row of B u (owned rows);
+  !> `absu` holds |u|.
+  subroutine apply_abs_b(this, absu, y)
+    class(b_operator_t), intent(inout) :: this
+    type(local_field_t), intent(in) :: absu(:)
+    real(dp), intent(inout) :: y(:)
+    integer(ip) :: ls
+    do ls = 1, this%nlocal
+      this%xall(this%offset(ls) + 1:this%offset(ls + 1)) = absu(ls)%v
+    end do
+    call local_rows(this, this%xall, .true., this%wloc2)
+    call this%con%exchange%scatter_add(this%wloc2, y)
+  end subroutine apply_abs_b
+
+  !> z = G x (local coarse blocks) for a dual vector x.
+  subroutine apply_g(this, x, z)
+    class(b_operator_t), intent(inout) :: this
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(out) :: z(:)
+    integer(ip) :: ls, e
+    call this%con%exchange%gather(x, this%wloc)
+    do ls = 1, this%nlocal
+      z(6*ls - 5:6*ls) = 0
+      associate (bs => this%con%b(ls))
+        do e = 1, bs%nentries
+          z(6*ls - 5:6*ls) = z(6*ls - 5:6*ls) + bs%g(:, e)*this%wloc(bs%row(e))
+        end do
+      end associate
+    end do
+  end subroutine apply_g
+
+  !> y = G^T z for local coarse blocks z.
+  subroutine apply_gt(this, z, y)
+    class(b_operator_t), intent(inout) :: this
+    real(dp), intent(in) :: z(:)
+    real(dp), intent(inout) :: y(:)
+    integer(ip) :: ls, e
+    this%wloc2 = 0
+    do ls = 1, this%nlocal
+      associate (bs => this%con%b(ls))
+        do e = 1, bs%nentries
+          this%wloc2(bs%row(e)) = this%wloc2(bs%row(e)) + dot_product(bs%g(:, e), z(6*ls - 5:6*ls))
+        end do
+      end associate
+    end do
+    call this%con%exchange%scatter_add(this%wloc2, y)
+  end subroutine apply_gt
+
+  !> Entries of B on this rank.
+  integer(i8) function n_entries(this)
+    class(b_operator_t), intent(in) :: this
+    integer(ip) :: ls
+    n_entries = 0
+    do ls = 1, this%nlocal
+      n_entries = n_entries + this%con%b(ls)%nentries
+    end do
+  end function n_entries
+
+  !> The constraint data, for the coarse problems of the FETI layer (they
+  !> assemble G G^T from it); `this` must be a target.
+  function constraints(this) result(con)
+    class(b_operator_t), intent(inout), target :: this
+    type(constraints_t), pointer :: con
+    con => this%con
+  end function constraints
+
+  !> Rows of all ranks: all, gluing, Dirichlet, contact.
+  function row_counts(this) result(n)
+    class(b_operator_t), intent(in) :: this
+    integer(ip) :: n(4)
+    n = [this%con%n_global, this%con%n_gluing_global, this%con%n_dirichlet_global, this%con%n_contact_global]
+  end function row_counts
+
+  !> Canonical keys of the owned rows (the same on any number of ranks).
+  function row_keys(this) result(v)
+    class(b_operator_t), intent(in) :: this
+    integer(i8), allocatable :: v(:)
+    v = this%con%key(1:this%con%n_own)
+  end function row_keys
+
+  !> Global id of owned row i: row_offset() + i.
+  integer(ip) function row_offset(this)
+    class(b_operator_t), intent(in) :: this
+    row_offset = this%con%offset
+  end function row_offset
+
+  !> Which owned rows are contact rows.
+  function is_contact(this) result(v)
+    class(b_operator_t), intent(in) :: this
+    logical, allocatable :: v(:)
+    v = this%con%kind == row_contact
+  end function is_contact
+
+  !> force = scale * multiplier (owned rows; 1 unless &solver scaling).
+  function force_scale(this) result(v)
+    class(b_operator_t), intent(in) :: this
+    real(dp), allocatable :: v(:)
+    v = this%con%scale
+  end function force_scale
+
+  !> c, the right-hand side of B u <= c (owned rows).
+  function gap_rhs(this) result(v)
+    class(b_operator_t), intent(in) :: this
+    real(dp), allocatable :: v(:)
+    v = this%con%c
+  end function gap_rhs
+
+  !> Node gid of each owned row.
+  function row_node_gid(this) result(v)
+    class(b_operator_t), intent(in) :: this
+    integer(ip), allocatable :: v(:)
+    v = this%con%node
+  end function row_node_gid
+
+  !> Coordinates (3, n_own) of the node of each owned row.
+  function row_coordinates(this, subs) result(x)
+    class(b_operator_t), intent(in) :: this
+    type(subdomain_t), intent(in) :: subs(:)
+    real(dp), allocatable :: x(:, :)
+    integer(ip) :: i
+    allocate (x(3, this%con%n_own))
+    do i = 1, this%con%n_own
+      x(:, i) = subs(this%con%row_sub(i))%coords(:, this%con%row_node(i))
+    end do
+  end function row_coordinates
+
+  !> A dual vector with entries in [-1, 1] that depend only on the rows'
+  !> canonical keys, so that it is the same on any number of ranks.
+  subroutine keyed_random(this, seed, x)
+    class(b_operator_t), intent(in) :: this
+    integer, intent(in) :: seed
+    real(dp), intent(out) :: x(:)
+    integer(ip) :: i
+    integer(i8) :: h
+    do i = 1, this%con%n_own
+      h = mix(this%con%key(i) + 1000003_i8*seed)
+      x(i) = real(mod(h, 2000001_i8), dp)/1000000.0_dp - 1
+    end do
+  contains
+    pure integer(i8) function mix(k)
+      integer(i8), intent(in) :: k
+      integer(i8) :: z
+      z = ieor(k, ishft(k, -13))
+      z = mod(abs(z)*48271_i8, 2147483647_i8)
+      z = mod(z*48271_i8 + 12345_i8, 2147483647_i8)
+      mix = mod(z*16807_i8, 2147483647_i8)
+    end function mix
+  end subroutine keyed_random
+
+  subroutine free(this)
+    class(b_operator_t), intent(inout) :: this
+    call this%con%exchange%free()
+    if (allocated(this%con%b)) deallocate (this%con%b)
+    if (allocated(this%offset)) deallocate (this%offset)
+    if (allocated(this%wloc)) deallocate (this%wloc, this%wloc2, this%xall)
+    this%nlocal = 0
+  end subroutine free
+end module b_operator

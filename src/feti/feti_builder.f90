@@ -1,0 +1,118 @@
+!> The builder of the TFETI operators (submodule of feti_operators): the
+!> set-up pipeline from the parameters to feti_t, one timer per phase:
+!> 'mesh' (decomposition, subdomain geometry), 'assembly' (K^s, f^s, R^s),
+!> 'factorization' (K^+, f_operator), 'B and G' (b_operator), 'coarse setup'
+!> (G G^T, projector) and 'dual setup' (d, e, lambda~, ||P F P||).
+submodule(feti_operators) feti_builder
+  use timers, only: timer_start, timer_stop
+  use kinds, only: MPI_INT_I8
+  use decomposition, only: build_decomposition
+  use subdomain, only: build_subdomain
+  use assembly, only: assemble_subdomain
+  implicit none
+
+contains
+
+  module subroutine setup(this, p, comm)
+    class(feti_t), intent(inout) :: this
+    type(params_t), intent(in) :: p
+    type(MPI_Comm), intent(in) :: comm
+    integer(ip) :: ls, r(2)
+    integer :: ierr
+    integer(i8) :: mydofs
+
+    call this%free()
+    this%communicator = comm
+
+    call timer_start('mesh')
+    call build_decomposition(p, comm, this%dec)
+    this%n_local_subs = size(this%dec%local_subdomains, kind=ip)
+    allocate (this%subs(this%n_local_subs))
+    do ls = 1, this%n_local_subs
+      call build_subdomain(this%dec, this%dec%local_subdomains(ls), this%subs(ls))
+    end do
+    call timer_stop('mesh')
+
+    call timer_start('assembly')
+    do ls = 1, this%n_local_subs
+      call assemble_subdomain(p, this%dec, this%subs(ls))
+    end do
+    call timer_stop('assembly')
+
+    mydofs = sum(this%subs(:)%ndof)
+    call timer_start('factorization')
+    call this%f%init(this%subs, p%solver%local_solver, p%solver%regularization, p%solver%local_ordering, &
+                     int(mydofs, ip))
+    call timer_stop('factorization')
+
+    call timer_start('B and G')
+    call this%b%init(p, this%dec, this%subs, comm)
+    call MPI_Allreduce(mydofs, this%n_primal_dofs, 1, MPI_INT_I8, MPI_SUM, comm, ierr)
+    allocate (this%xall(this%b%n_concat()))
+    call timer_stop('B and G')
+
+    call timer_start('coarse setup')
+    call this%proj%init(this%dec, this%b, comm, p%solver%coarse_placement)
+    call timer_stop('coarse setup')
+
+    call timer_start('dual setup')
+    associate (n => this%b%n_own())
+      allocate (this%d(n), this%lambda_tilde(n), this%lower(n), this%contact(n), this%e(6*this%n_local_subs))
+      ! d = B K^+ f - c, e = R^T f
+      do ls = 1, this%n_local_subs
+        r = this%b%dof_range(ls)
+        this%xall(r(1):r(2)) = this%subs(ls)%f
+        this%e(6*ls - 5:6*ls) = matmul(this%subs(ls)%f, this%subs(ls)%R)
+      end do
+      call this%f%local_solve(this%xall)
+      call this%b%apply_concat(this%xall, this%d)
+      this%d = this%d - this%b%gap_rhs()
+      ! lambda~ = G^T (G G^T)^{-1} e
+      block
+        real(dp) :: z(6*this%n_local_subs)
+        call this%proj%solve(this%e, z)
+        call this%b%apply_gt(z, this%lambda_tilde)
+      end block
+      this%contact = this%b%is_contact()
+      this%lower = -huge(1.0_dp)
+      where (this%contact) this%lower = -this%lambda_tilde
+    end associate
+    call estimate_norm_pfp(this, p%solver%power_iterations)
+    call timer_stop('dual setup')
+  end subroutine setup
+
+  !> ||P F P|| by the power method on Im P, from a keyed random start. It
+  !> stops when the estimate changes by less than 1e-3 relative or after
+  !> `max_iterations`. The estimate is ||P F P x|| for the last unit x, a lower
+  !> bound that converges from below; it only scales the dual problem and sets
+  !> the MPRGP step 1.9/||A||, which tolerates an underestimate of 5%.
+  subroutine estimate_norm_pfp(this, max_iterations)
+    class(feti_t), intent(inout) :: this
+    integer(ip), intent(in) :: max_iterations
+    real(dp), allocatable :: x(:), y(:), z(:)
+    real(dp) :: previous, nrm
+    integer(ip) :: it
+    character(len=100) :: line
+    allocate (x(this%b%n_own()), y(this%b%n_own()), z(this%b%n_own()))
+    call this%keyed_random(7, z)
+    call this%project(z, x)
+    nrm = this%norm(x)
+    this%pfp_norm = 0
+    if (nrm == 0) return
+    x = x/nrm
+    previous = 0
+    do it = 1, max_iterations
+      call this%apply_f(x, z)
+      call this%project(z, y)            ! y = P F P x, since P x = x
+      nrm = this%norm(y)
+      if (nrm == 0) exit
+      x = y/nrm
+      this%pfp_norm = nrm
+      if (abs(nrm - previous) <= 1.0e-3_dp*nrm) exit
+      previous = nrm
+    end do
+    write (line, '(a,es12.5,a,i0,a)') '||P F P|| ~ ', this%pfp_norm, ' (power method, ', min(it, max_iterations), &
+      ' iterations)'
+    call log_message(line)
+  end subroutine estimate_norm_pfp
+end submodule feti_builder

@@ -1,0 +1,116 @@
+!> The coarse problem of TFETI and the projector built on it: (G G^T)^{-1}
+!> (coarse_problem, MUMPS, redundant or distributed by `&solver
+!> coarse_placement`) and P = I - G^T (G G^T)^{-1} G. G is applied through
+!> the B operator that holds its entries (b_operator), which is passed in.
+!> Timer 'coarse solve'.
+module projector
+  use kinds, only: dp, i8
+  use timers, only: timer_start, timer_stop
+  use decomposition, only: decomposition_t
+  use constraints, only: constraints_t
+  use coarse_problem, only: coarse_problem_t, coarse_layout_t, build_coarse_layout
+  use orthonormal_coarse, only: orthonormal_coarse_t
+  use b_operator, only: b_operator_t
+  use mpi_f08, only: MPI_Comm
+  implicit none
+  private
+
+  type, public :: projector_t
+    private
+    type(MPI_Comm) :: comm
+    type(coarse_layout_t) :: layout                  !< where each subdomain's 6-block goes
+    type(coarse_problem_t) :: coarse                 !< (G G^T)^{-1}
+    real(dp), allocatable :: cwork(:), cwork2(:)     !< work: local coarse blocks
+    integer(i8) :: solves = 0
+  contains
+    procedure :: init
+    procedure :: solve
+    procedure :: project
+    procedure :: init_active_coarse
+    procedure :: init_orthonormal
+    procedure :: n_solves
+    procedure :: free
+  end type projector_t
+
+contains
+
+  !> Assemble and factorize G G^T for the subdomains of `dec` and the B (and
+  !> G) of `b`, with `placement` 'redundant' or 'distributed'. Collective.
+  subroutine init(this, dec, b, comm, placement)
+    class(projector_t), intent(inout) :: this
+    type(decomposition_t), intent(in) :: dec
+    type(b_operator_t), intent(inout), target :: b
+    type(MPI_Comm), intent(in) :: comm
+    character(len=*), intent(in) :: placement
+    type(constraints_t), pointer :: con
+    call this%free()
+    this%comm = comm
+    con => b%constraints()
+    call build_coarse_layout(dec, comm, this%layout)
+    call this%coarse%init(dec, con, this%layout, comm, placement=placement)
+    allocate (this%cwork(6*this%layout%nlocal), this%cwork2(6*this%layout%nlocal))
+  end subroutine init
+
+  !> x = (G G^T)^{-1} rhs on local coarse blocks.
+  subroutine solve(this, rhs, x)
+    class(projector_t), intent(inout) :: this
+    real(dp), intent(in) :: rhs(:)
+    real(dp), intent(out) :: x(:)
+    call timer_start('coarse solve')
+    call this%coarse%solve(rhs, x)
+    this%solves = this%solves + 1
+    call timer_stop('coarse solve')
+  end subroutine solve
+
+  !> y = P x = x - G^T (G G^T)^{-1} G x (y may not be x); optionally also
+  !> G x and (G G^T)^{-1} G x, which the dual problem keeps (see dual_problem).
+  subroutine project(this, b, x, y, gx, zx)
+    class(projector_t), intent(inout) :: this
+    type(b_operator_t), intent(inout) :: b
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(inout) :: y(:)
+    real(dp), intent(out), optional :: gx(:), zx(:)
+    call b%apply_g(x, this%cwork)
+    call this%solve(this%cwork, this%cwork2)
+    call b%apply_gt(this%cwork2, y)
+    y = x - y
+    if (present(gx)) gx = this%cwork
+    if (present(zx)) zx = this%cwork2
+  end subroutine project
+
+  !> G_A G_A^T assembled and factorized anew for the rows in `mask` (the
+  !> standard reconstruction, Eq. 10). Collective.
+  subroutine init_active_coarse(this, dec, b, cp, mask)
+    class(projector_t), intent(in) :: this
+    type(decomposition_t), intent(in) :: dec
+    type(b_operator_t), intent(inout), target :: b
+    type(coarse_problem_t), intent(inout) :: cp
+    logical, intent(in) :: mask(:)
+    type(constraints_t), pointer :: con
+    con => b%constraints()
+    call cp%init(dec, con, this%layout, this%comm, mask)
+  end subroutine init_active_coarse
+
+  !> The explicit G~ = L^{-1} G of `&solver coarse = 'cholesky'`. Collective.
+  subroutine init_orthonormal(this, dec, b, orth)
+    class(projector_t), intent(in) :: this
+    type(decomposition_t), intent(in) :: dec
+    type(b_operator_t), intent(inout), target :: b
+    type(orthonormal_coarse_t), intent(inout) :: orth
+    type(constraints_t), pointer :: con
+    con => b%constraints()
+    call orth%init(dec, con, this%layout, this%comm)
+  end subroutine init_orthonormal
+
+  integer(i8) function n_solves(this)
+    class(projector_t), intent(in) :: this
+    n_solves = this%solves
+  end function n_solves
+
+  subroutine free(this)
+    class(projector_t), intent(inout) :: this
+    call this%coarse%free()
+    if (allocated(this%cwork)) deallocate (this%cwork, this%cwork2)
+    this%solves = 0
+  end subroutine free
+end module projector
