@@ -1,19 +1,34 @@
-!> Sorting of integer arrays, the one place for it: in place (heapsort,
+!> Integer arrays, the one place for their sorting: in place (heapsort,
 !> O(n log n), no recursion) with duplicates removed on request, binary
-!> search in a sorted array, and stable sorting by keys (merge sort)
-!> returning a permutation.
+!> search in a sorted array, stable sorting by keys (merge sort) returning a
+!> permutation, and appending to a growing array (for adjacency lists).
 module sorting
   use kinds, only: ip, i8
   implicit none
   private
 
-  public :: sort_ints, sort_unique, binary_search, sort_permutation
+  public :: sort_ints, sort_unique, binary_search, sort_permutation, append_int
 
   interface sort_permutation
     module procedure sort_permutation_i8, sort_permutation_ip
   end interface sort_permutation
 
 contains
+
+  !> v(n+1) = x, n = n + 1; v grows (doubles) when full.
+  pure subroutine append_int(v, n, x)
+    integer(ip), allocatable, intent(inout) :: v(:)
+    integer(ip), intent(inout) :: n
+    integer(ip), intent(in) :: x
+    integer(ip), allocatable :: bigger(:)
+    if (n == size(v)) then
+      allocate (bigger(2*size(v) + 16))
+      bigger(1:n) = v(1:n)
+      call move_alloc(bigger, v)
+    end if
+    n = n + 1
+    v(n) = x
+  end subroutine append_int
 
   !> Sort a(:) ascending in place.
   pure subroutine sort_ints(a)

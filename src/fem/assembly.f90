@@ -12,7 +12,7 @@ module assembly
                         von_mises, q1_face_nodes
   use materials, only: subdomain_material
   use rigid_modes, only: rigid_body_modes
-  use sorting, only: sort_ints
+  use sorting, only: sort_ints, append_int
   implicit none
   private
 
@@ -46,7 +46,7 @@ contains
   !> work is proportional to the number of elements.
   subroutine assemble_stiffness(sub)
     type(subdomain_t), intent(inout) :: sub
-    integer(ip), allocatable :: nptr(:), nelems(:), adjptr(:), adj(:), marker(:), tmp(:)
+    integer(ip), allocatable :: nptr(:), nelems(:), adjptr(:), adj(:), marker(:)
     integer(ip) :: n, e, a, b, i, j, k, m, c, nadj, first, row, base, pos, ln(8)
     real(dp) :: ke(24, 24), x(3, 8)
 
@@ -85,13 +85,7 @@ contains
           b = sub%elem_nodes(i, nelems(k))
           if (marker(b) == a) cycle
           marker(b) = a
-          if (nadj == size(adj)) then
-            allocate (tmp(2*size(adj)))
-            tmp(1:nadj) = adj(1:nadj)
-            call move_alloc(tmp, adj)
-          end if
-          nadj = nadj + 1
-          adj(nadj) = b
+          call append_int(adj, nadj, b)
         end do
       end do
       call sort_ints(adj(first:nadj))

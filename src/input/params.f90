@@ -9,12 +9,12 @@
 !> Every variable is documented in docs/INPUT.md.
 module params
   use kinds, only: dp, ip, path_len, name_len
-  use errors, only: collective_error, exit_input_error
+  use errors, only: collective_error, exit_input_error, fatal_error
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Bcast, MPI_BYTE, MPI_INTEGER, MPI_CHARACTER
   implicit none
   private
 
-  public :: read_params, check_params, echo_params, params_json, default_params
+  public :: read_params, check_params, echo_params, default_params, param_items, group_names
 
   integer, parameter :: msg_len = 1024
 
@@ -87,6 +87,16 @@ module params
     logical :: write_report = .true.          !< report.json
   end type output_params_t
 
+  integer, parameter :: max_values = 3      !< the most values of one variable (arrays of 3)
+
+  !> One variable of a group as the namelist writes it (param_items).
+  type, public :: param_item_t
+    character(len=name_len) :: name = ''                !< lower case
+    character :: kind = 'i'                             !< 'i' integer, 'r' real, 'l' logical (T/F), 's' string
+    integer :: n = 0                                    !< number of values (> 1: an array)
+    character(len=path_len) :: values(max_values) = ''  !< the values as text
+  end type param_item_t
+
   !> All parameters of a run.
   type, public :: params_t
     character(len=path_len) :: file = ''
@@ -100,6 +110,7 @@ module params
     type(output_params_t) :: output
   end type params_t
 
+  !> The namelist groups, in the order of the echo and of report.json.
   character(len=*), parameter :: group_names(8) = [character(len=14) :: 'mesh', 'material', &
     'load', 'boundary', 'obstacle', 'solver', 'reconstruction', 'output']
 
@@ -326,7 +337,7 @@ contains
     character(len=:), allocatable :: body, piece, variable
     character(len=msg_len) :: msg2
 
-    call read_group(name, group_text, p, status, msg)
+    call group_namelist(name, p, status, msg, group_text)
     if (status == 0) return
     ! Locate the assignments 'variable = values' and read them one at a time.
     body_start = index(group_text, ' ')
@@ -336,14 +347,14 @@ contains
     scratch = p
     ! gfortran (12) accepts the read that follows a failed logical read: an
     ! empty read of the group first puts its reader back into a clean state.
-    call read_group(name, '&'//name//' /', scratch, s2, msg2)
+    call group_namelist(name, scratch, s2, msg2, '&'//name//' /')
     do k = 1, nstarts
       if (k < nstarts) then
         piece = body(starts(k):starts(k + 1) - 1)
       else
         piece = body(starts(k):)
       end if
-      call read_group(name, '&'//name//' '//trim(adjustl(piece))//' /', scratch, s2, msg2)
+      call group_namelist(name, scratch, s2, msg2, '&'//name//' '//trim(adjustl(piece))//' /')
       if (s2 /= 0) then
         i = index(piece, '=')
         variable = lower(trim(adjustl(piece(1:i - 1))))
@@ -423,12 +434,20 @@ contains
     end if
   end subroutine assignment_starts
 
-  !> Read the namelist group `name` from the text `group_text` into `p`.
-  subroutine read_group(name, group_text, p, status, msg)
-    character(len=*), intent(in) :: name, group_text
+  !> The one table of the variables: each group's namelist, the copy of `p`
+  !> into it and back. With `group_text`, read the group from that text into
+  !> `p`; without, write it (as the compiler writes a namelist, strings quoted)
+  !> into `written` and leave `p` as it is. Adding a variable: a component
+  !> with its default in the group's type, a line here, a check in
+  !> check_params; the echo and report.json follow (param_items).
+  subroutine group_namelist(name, p, status, msg, group_text, written)
+    character(len=*), intent(in) :: name
     type(params_t), intent(inout) :: p
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
+    character(len=*), intent(in), optional :: group_text
+    character(len=*), intent(out), optional :: written(:)
+    logical :: reading
     integer(ip) :: nsub(3), nel(3), distortion_seed, seed, max_outer, max_hessian, power_iterations
     real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, &
@@ -451,31 +470,43 @@ contains
 
     msg = ''
     status = 0
+    reading = present(group_text)
+    if (present(written)) written = ''
     select case (name)
     case ('mesh')
       nsub = p%mesh%nsub; nel = p%mesh%nel; lengths = p%mesh%lengths
       distortion = p%mesh%distortion; distortion_seed = p%mesh%distortion_seed
       decomposition = p%mesh%decomposition; mapping = p%mesh%mapping
-      read (group_text, nml=mesh, iostat=status, iomsg=msg)
+      if (reading) read (group_text, nml=mesh, iostat=status, iomsg=msg)
+      if (.not. reading) write (written, nml=mesh, delim='quote', iostat=status, iomsg=msg)
+      if (.not. reading) return
       p%mesh = mesh_params_t(nsub, nel, lengths, distortion, distortion_seed, &
                              lower(decomposition), lower(mapping))
     case ('material')
       young = p%material%young; poisson = p%material%poisson
       variation = p%material%variation; contrast = p%material%contrast; seed = p%material%seed
-      read (group_text, nml=material, iostat=status, iomsg=msg)
+      if (reading) read (group_text, nml=material, iostat=status, iomsg=msg)
+      if (.not. reading) write (written, nml=material, delim='quote', iostat=status, iomsg=msg)
+      if (.not. reading) return
       p%material = material_params_t(young, poisson, lower(variation), contrast, seed)
     case ('load')
       top_pressure = p%load%top_pressure
-      read (group_text, nml=load, iostat=status, iomsg=msg)
+      if (reading) read (group_text, nml=load, iostat=status, iomsg=msg)
+      if (.not. reading) write (written, nml=load, delim='quote', iostat=status, iomsg=msg)
+      if (.not. reading) return
       p%load = load_params_t(top_pressure)
     case ('boundary')
       top_dirichlet = p%boundary%top_dirichlet; top_displacement = p%boundary%top_displacement
       symmetry_x0 = p%boundary%symmetry_x0; symmetry_y0 = p%boundary%symmetry_y0
-      read (group_text, nml=boundary, iostat=status, iomsg=msg)
+      if (reading) read (group_text, nml=boundary, iostat=status, iomsg=msg)
+      if (.not. reading) write (written, nml=boundary, delim='quote', iostat=status, iomsg=msg)
+      if (.not. reading) return
       p%boundary = boundary_params_t(top_dirichlet, top_displacement, symmetry_x0, symmetry_y0)
     case ('obstacle')
       shape = p%obstacle%shape; radius = p%obstacle%radius; gap = p%obstacle%gap
-      read (group_text, nml=obstacle, iostat=status, iomsg=msg)
+      if (reading) read (group_text, nml=obstacle, iostat=status, iomsg=msg)
+      if (.not. reading) write (written, nml=obstacle, delim='quote', iostat=status, iomsg=msg)
+      if (.not. reading) return
       p%obstacle = obstacle_params_t(lower(shape), radius, gap)
     case ('solver')
       associate (s => p%solver)
@@ -487,7 +518,9 @@ contains
         coarse_placement = s%coarse_placement
         regularization = s%regularization; scaling = s%scaling; monitor = s%monitor
       end associate
-      read (group_text, nml=solver, iostat=status, iomsg=msg)
+      if (reading) read (group_text, nml=solver, iostat=status, iomsg=msg)
+      if (.not. reading) write (written, nml=solver, delim='quote', iostat=status, iomsg=msg)
+      if (.not. reading) return
       p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
                                  rho_scale, m_scale, beta, eta_scale, power_iterations, lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(coarse_placement), &
@@ -495,15 +528,19 @@ contains
     case ('reconstruction')
       method = p%reconstruction%method; active_tol = p%reconstruction%active_tol
       kkt_tol = p%reconstruction%kkt_tol
-      read (group_text, nml=reconstruction, iostat=status, iomsg=msg)
+      if (reading) read (group_text, nml=reconstruction, iostat=status, iomsg=msg)
+      if (.not. reading) write (written, nml=reconstruction, delim='quote', iostat=status, iomsg=msg)
+      if (.not. reading) return
       p%reconstruction = reconstruction_params_t(lower(method), active_tol, kkt_tol)
     case ('output')
       directory = p%output%directory; run_name = p%output%run_name
       write_hdf5 = p%output%write_hdf5; write_report = p%output%write_report
-      read (group_text, nml=output, iostat=status, iomsg=msg)
+      if (reading) read (group_text, nml=output, iostat=status, iomsg=msg)
+      if (.not. reading) write (written, nml=output, delim='quote', iostat=status, iomsg=msg)
+      if (.not. reading) return
       p%output = output_params_t(directory, run_name, write_hdf5, write_report)
     end select
-  end subroutine read_group
+  end subroutine group_namelist
 
   !> Check every value; the first violation gives `status` /= 0 and a message
   !> naming the group, the variable and the allowed values.
@@ -600,80 +637,173 @@ contains
     end subroutine fail
   end subroutine check_params
 
-  !> Print the parameters actually used (rank 0 writes).
+  !> The variables of group `name` as the namelist writes them (see
+  !> group_namelist): the one source of the echo and of report.json.
+  subroutine param_items(p, name, items)
+    type(params_t), intent(in) :: p
+    character(len=*), intent(in) :: name
+    type(param_item_t), allocatable, intent(out) :: items(:)
+    character(len=:), allocatable :: lines(:)
+    character(len=:), allocatable :: text
+    type(params_t) :: copy
+    integer :: status, k
+    character(len=msg_len) :: msg
+    allocate (character(len=path_len + 64) :: lines(64))
+    copy = p
+    call group_namelist(name, copy, status, msg, written=lines)
+    if (status /= 0) call fatal_error('params: cannot write group &'//name//': '//trim(msg))
+    text = ''
+    do k = 2, size(lines)             ! lines(1) is '&GROUP'
+      text = text//' '//trim(lines(k))
+    end do
+    call parse_namelist(text, items)
+  end subroutine param_items
+
+  !> Split the body of a written namelist group ("NAME= v, r*v, ... /") into
+  !> items; values stay text, repeat counts are expanded, quotes removed.
+  subroutine parse_namelist(text, items)
+    character(len=*), intent(in) :: text
+    type(param_item_t), allocatable, intent(out) :: items(:)
+    type(param_item_t) :: item
+    character(len=:), allocatable :: token
+    integer :: i, j, star, repeat, k
+    allocate (items(0))
+    i = 1
+    do
+      i = next_nonblank(text, i)
+      if (i > len(text)) exit
+      if (text(i:i) == '/') exit
+      j = index(text(i:), '=') + i - 1
+      if (allocated(token)) deallocate (token)
+      item = param_item_t(name=lower(trim(adjustl(text(i:j - 1)))))
+      i = j + 1
+      do                                     ! values up to the next NAME= or '/'
+        i = next_nonblank(text, i)
+        if (i > len(text)) exit
+        if (text(i:i) == '/' .or. starts_name(text, i)) exit
+        if (text(i:i) == '"') then
+          call quoted(text, i, token)
+          item%kind = 's'
+          repeat = 1
+        else
+          j = scan(text(i:), ', /') + i - 1
+          if (j < i) j = len(text) + 1
+          token = text(i:j - 1)
+          i = j
+          repeat = 1
+          star = index(token, '*')
+          if (star > 0) then
+            read (token(1:star - 1), *) repeat
+            token = token(star + 1:)
+          end if
+          if (token == 'T' .or. token == 'F') then
+            item%kind = 'l'
+          else if (scan(token, '.eE') > 0) then
+            item%kind = 'r'
+          else
+            item%kind = 'i'
+          end if
+        end if
+        do k = 1, repeat
+          item%n = item%n + 1
+          item%values(item%n) = token
+        end do
+        i = next_nonblank(text, i)
+        if (i <= len(text)) then
+          if (text(i:i) == ',') i = i + 1
+        end if
+      end do
+      items = [items, item]
+    end do
+  contains
+    pure integer function next_nonblank(t, from)
+      character(len=*), intent(in) :: t
+      integer, intent(in) :: from
+      next_nonblank = from
+      do while (next_nonblank <= len(t))
+        if (t(next_nonblank:next_nonblank) /= ' ') exit
+        next_nonblank = next_nonblank + 1
+      end do
+    end function next_nonblank
+    !> A variable name followed by '=' starts at t(from:).
+    pure logical function starts_name(t, from)
+      character(len=*), intent(in) :: t
+      integer, intent(in) :: from
+      integer :: e
+      e = from
+      do while (e <= len(t))
+        if (.not. is_name_char(t(e:e))) exit
+        e = e + 1
+      end do
+      e = next_nonblank(t, e)
+      starts_name = e > from .and. e <= len(t)
+      if (starts_name) starts_name = t(e:e) == '='
+    end function starts_name
+    !> The string quoted by '"' at t(from:), doubled quotes undone; from moves past it.
+    subroutine quoted(t, from, value)
+      character(len=*), intent(in) :: t
+      integer, intent(inout) :: from
+      character(len=:), allocatable, intent(out) :: value
+      value = ''
+      from = from + 1
+      do while (from <= len(t))
+        if (t(from:from) == '"') then
+          if (from < len(t)) then
+            if (t(from + 1:from + 1) == '"') then
+              value = value//'"'
+              from = from + 2
+              cycle
+            end if
+          end if
+          from = from + 1
+          exit
+        end if
+        value = value//t(from:from)
+        from = from + 1
+      end do
+      value = trim(value)
+    end subroutine quoted
+  end subroutine parse_namelist
+
+  !> Print the parameters actually used (rank 0 writes): one line per group,
+  !> in the syntax of the input.
   subroutine echo_params(p, unit)
     type(params_t), intent(in) :: p
     integer, intent(in) :: unit
+    type(param_item_t), allocatable :: items(:)
+    character(len=:), allocatable :: line
+    integer :: g, k, v
     write (unit, '(a)') 'input file: '//trim(p%file)
-    write (unit, '(a)') '&mesh nsub = '//ints(p%mesh%nsub)//', nel = '//ints(p%mesh%nel)// &
-      ', lengths = '//reals(p%mesh%lengths)//', distortion = '//reals([p%mesh%distortion])// &
-      ', distortion_seed = '//ints([p%mesh%distortion_seed])//", decomposition = '"// &
-      trim(p%mesh%decomposition)//"', mapping = '"//trim(p%mesh%mapping)//"' /"
-    write (unit, '(a)') '&material young = '//reals([p%material%young])//', poisson = '// &
-      reals([p%material%poisson])//", variation = '"//trim(p%material%variation)// &
-      "', contrast = "//reals([p%material%contrast])//', seed = '//ints([p%material%seed])//' /'
-    write (unit, '(a)') '&load top_pressure = '//reals([p%load%top_pressure])//' /'
-    write (unit, '(a)') '&boundary top_dirichlet = '//logs(p%boundary%top_dirichlet)// &
-      ', top_displacement = '//reals(p%boundary%top_displacement)//', symmetry_x0 = '// &
-      logs(p%boundary%symmetry_x0)//', symmetry_y0 = '//logs(p%boundary%symmetry_y0)//' /'
-    write (unit, '(a)') "&obstacle shape = '"//trim(p%obstacle%shape)//"', radius = "// &
-      reals([p%obstacle%radius])//', gap = '//reals([p%obstacle%gap])//' /'
-    associate (s => p%solver)
-      write (unit, '(a)') '&solver tol = '//reals([s%tol])//', max_outer = '//ints([s%max_outer])// &
-        ', max_hessian = '//ints([s%max_hessian])//', gamma = '//reals([s%gamma])// &
-        ', alpha_scale = '//reals([s%alpha_scale])//", expansion = '"//trim(s%expansion)// &
-        "', rho_scale = "//reals([s%rho_scale])//', m_scale = '//reals([s%m_scale])// &
-        ', beta = '//reals([s%beta])//', eta_scale = '//reals([s%eta_scale])// &
-        ', power_iterations = '//ints([s%power_iterations])//", coarse = '"//trim(s%coarse)// &
-        "', coarse_placement = '"//trim(s%coarse_placement)// &
-        "', local_ordering = '"//trim(s%local_ordering)//"', local_solver = '"//trim(s%local_solver)// &
-        "', regularization = "// &
-        reals([s%regularization])//", scaling = '"//trim(s%scaling)//"', monitor = "//logs(s%monitor)//' /'
-    end associate
-    write (unit, '(a)') "&reconstruction method = '"//trim(p%reconstruction%method)// &
-      "', active_tol = "//reals([p%reconstruction%active_tol])//', kkt_tol = '// &
-      reals([p%reconstruction%kkt_tol])//' /'
-    write (unit, '(a)') "&output directory = '"//trim(p%output%directory)//"', run_name = '"// &
-      trim(p%output%run_name)//"', write_hdf5 = "//logs(p%output%write_hdf5)//', write_report = '// &
-      logs(p%output%write_report)//' /'
+    do g = 1, size(group_names)
+      call param_items(p, trim(group_names(g)), items)
+      line = '&'//trim(group_names(g))
+      do k = 1, size(items)
+        line = line//trim(merge(',', ' ', k > 1))//' '//trim(items(k)%name)//' ='
+        do v = 1, items(k)%n
+          line = line//' '//echo_value(items(k)%kind, items(k)%values(v))
+        end do
+      end do
+      write (unit, '(a)') line//' /'
+    end do
+  contains
+    function echo_value(kind, text) result(s)
+      character, intent(in) :: kind
+      character(len=*), intent(in) :: text
+      character(len=:), allocatable :: s
+      character(len=32) :: buf
+      real(dp) :: x
+      select case (kind)
+      case ('s')
+        s = "'"//trim(text)//"'"
+      case ('r')
+        read (text, *) x
+        write (buf, '(g0.6)') x
+        s = trim(adjustl(buf))
+      case default
+        s = trim(adjustl(text))
+      end select
+    end function echo_value
   end subroutine echo_params
-
-  !> The parameters as a JSON object (for report.json).
-  function params_json(p) result(json)
-    type(params_t), intent(in) :: p
-    character(len=:), allocatable :: json
-    json = '{"file": "'//jstr(p%file)//'", ' // &
-      '"mesh": {"nsub": ['//jints(p%mesh%nsub)//'], "nel": ['//jints(p%mesh%nel)// &
-      '], "lengths": ['//jreals(p%mesh%lengths)//'], "distortion": '//jreals([p%mesh%distortion])// &
-      ', "distortion_seed": '//jints([p%mesh%distortion_seed])//', "decomposition": "'// &
-      jstr(p%mesh%decomposition)//'", "mapping": "'//jstr(p%mesh%mapping)//'"}, '// &
-      '"material": {"young": '//jreals([p%material%young])//', "poisson": '// &
-      jreals([p%material%poisson])//', "variation": "'//jstr(p%material%variation)// &
-      '", "contrast": '//jreals([p%material%contrast])//', "seed": '//jints([p%material%seed])//'}, '// &
-      '"load": {"top_pressure": '//jreals([p%load%top_pressure])//'}, '// &
-      '"boundary": {"top_dirichlet": '//jlog(p%boundary%top_dirichlet)//', "top_displacement": ['// &
-      jreals(p%boundary%top_displacement)//'], "symmetry_x0": '//jlog(p%boundary%symmetry_x0)// &
-      ', "symmetry_y0": '//jlog(p%boundary%symmetry_y0)//'}, '// &
-      '"obstacle": {"shape": "'//jstr(p%obstacle%shape)//'", "radius": '//jreals([p%obstacle%radius])// &
-      ', "gap": '//jreals([p%obstacle%gap])//'}, '// &
-      '"solver": {"tol": '//jreals([p%solver%tol])//', "max_outer": '//jints([p%solver%max_outer])// &
-      ', "max_hessian": '//jints([p%solver%max_hessian])//', "gamma": '//jreals([p%solver%gamma])// &
-      ', "alpha_scale": '//jreals([p%solver%alpha_scale])//', "expansion": "'//jstr(p%solver%expansion)// &
-      '", "rho_scale": '//jreals([p%solver%rho_scale])//', "m_scale": '//jreals([p%solver%m_scale])// &
-      ', "beta": '//jreals([p%solver%beta])//', "eta_scale": '//jreals([p%solver%eta_scale])// &
-      ', "power_iterations": '//jints([p%solver%power_iterations])//', "coarse": "'// &
-      jstr(p%solver%coarse)//'", "local_ordering": "'//jstr(p%solver%local_ordering)// &
-      '", "local_solver": "'//jstr(p%solver%local_solver)// &
-      '", "coarse_placement": "'//jstr(p%solver%coarse_placement)// &
-      '", "regularization": '//jreals([p%solver%regularization])//', "scaling": "'// &
-      jstr(p%solver%scaling)//'", "monitor": '// &
-      jlog(p%solver%monitor)//'}, '// &
-      '"reconstruction": {"method": "'//jstr(p%reconstruction%method)//'", "active_tol": '// &
-      jreals([p%reconstruction%active_tol])//', "kkt_tol": '//jreals([p%reconstruction%kkt_tol])//'}, '// &
-      '"output": {"directory": "'//jstr(p%output%directory)//'", "run_name": "'//jstr(p%output%run_name)// &
-      '", "write_hdf5": '//jlog(p%output%write_hdf5)//', "write_report": '// &
-      jlog(p%output%write_report)//'}}'
-  end function params_json
 
   ! ---- small text helpers ----
 
@@ -742,58 +872,8 @@ contains
     end do
   end function reals
 
-  function logs(v) result(s)
-    logical, intent(in) :: v
-    character(len=:), allocatable :: s
-    s = merge('T', 'F', v)
-  end function logs
 
-  function jints(v) result(s)
-    integer(ip), intent(in) :: v(:)
-    character(len=:), allocatable :: s
-    character(len=24) :: buf
-    integer :: k
-    s = ''
-    do k = 1, size(v)
-      write (buf, '(i0)') v(k)
-      s = s//trim(buf)
-      if (k < size(v)) s = s//', '
-    end do
-  end function jints
 
-  function jreals(v) result(s)
-    real(dp), intent(in) :: v(:)
-    character(len=:), allocatable :: s
-    character(len=32) :: buf
-    integer :: k
-    s = ''
-    do k = 1, size(v)
-      write (buf, '(es24.16e3)') v(k)
-      s = s//trim(adjustl(buf))
-      if (k < size(v)) s = s//', '
-    end do
-  end function jreals
 
-  !> A string for JSON: trimmed, with '\' and '"' escaped and control characters dropped.
-  function jstr(v) result(s)
-    character(len=*), intent(in) :: v
-    character(len=:), allocatable :: s
-    integer :: i
-    s = ''
-    do i = 1, len_trim(v)
-      select case (v(i:i))
-      case ('"', '\')
-        s = s//'\'//v(i:i)
-      case default
-        if (iachar(v(i:i)) >= 32) s = s//v(i:i)
-      end select
-    end do
-  end function jstr
 
-  function jlog(v) result(s)
-    logical, intent(in) :: v
-    character(len=:), allocatable :: s
-    s = merge('true ', 'false', v)
-    s = trim(s)
-  end function jlog
 end module params

@@ -6,14 +6,14 @@ module run_report
   use kinds, only: dp, ip, i8, MPI_INT_I8
   use timers, only: timer_stat_t
   use logger, only: log_message
-  use params, only: params_t, params_json
+  use params, only: params_t
   use feti_operators, only: feti_t, feti_sizes_t
   use qp_problem, only: qp_status_name
   use smalbe, only: smalbe_t
   use tfeti_dualization, only: tfeti_dualization_t, dual_solution_t
   use contact_summary, only: contact_summary_t
   use json_writer, only: json_writer_t
-  use report, only: timings_json, memory_json, blas_json
+  use report, only: timings_json, memory_json, blas_json, params_json
   use blas_threads, only: blas_in_use
   use mpi_f08, only: MPI_Comm_size, MPI_Allreduce, MPI_SUM
   implicit none

@@ -29,8 +29,8 @@
 module kplus
   use kinds, only: dp, ip, i8
   use errors, only: fatal_error
-  use subdomain, only: subdomain_t
-  use sorting, only: sort_ints
+  use subdomain, only: subdomain_t, node_dofs
+  use sorting, only: sort_ints, append_int
   use mumps_wrapper, only: mumps_t
   use metis_wrapper, only: metis_node_nd
   use mpi_f08, only: MPI_COMM_SELF
@@ -351,17 +351,11 @@ contains
     integer(ip), allocatable :: sorted(:)
     real(dp), allocatable :: rf(:, :), q(:, :)
     real(dp) :: lambda(6), v(6, 6)
-    integer(ip) :: i, j, c, nf
+    integer(ip) :: j
 
-    nf = size(nodes)
     sorted = nodes
     call sort_ints(sorted)
-    allocate (dofs(3*nf))
-    do i = 1, nf
-      do c = 1, 3
-        dofs(3*(i - 1) + c) = 3*(sorted(i) - 1) + c
-      end do
-    end do
+    dofs = node_dofs(sorted)
     rf = restricted_r(sub, sorted)
     call gram_eigen(rf, lambda, v)
     ! Q_F = R_F V diag(lambda)^(-1/2): orthonormal columns spanning R_F
@@ -456,24 +450,11 @@ contains
       xadj(a + 1) = p + 1
     end do
     call metis_node_nd(nn, xadj, adjncy(1:p), order, position)
-    allocate (perm(3*nn))
-    do a = 1, nn
-      do c = 1, 3
-        perm(3*(a - 1) + c) = 3*(position(a) - 1) + c
-      end do
-    end do
+    perm = node_dofs(position)
   contains
     subroutine push(node)
       integer(ip), intent(in) :: node
-      if (p == size(adjncy)) call grow()
-      p = p + 1
-      adjncy(p) = node
+      call append_int(adjncy, p, node)
     end subroutine push
-    subroutine grow()
-      integer(ip), allocatable :: bigger(:)
-      allocate (bigger(2*size(adjncy) + 16))
-      bigger(1:p) = adjncy(1:p)
-      call move_alloc(bigger, adjncy)
-    end subroutine grow
   end subroutine node_nested_dissection
 end module kplus

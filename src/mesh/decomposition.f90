@@ -18,7 +18,7 @@ module decomposition
   use logger, only: log_message
   use params, only: params_t
   use metis_wrapper, only: metis_part_mesh_dual, metis_part_graph_kway
-  use sorting, only: sort_ints
+  use sorting, only: sort_ints, append_int
   use box_mesh, only: box_mesh_t, box_mesh_init
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast
   implicit none
@@ -257,7 +257,7 @@ contains
   subroutine subdomain_graph(dec, xadj, adjncy)
     type(decomposition_t), intent(in) :: dec
     integer(ip), allocatable, intent(out) :: xadj(:), adjncy(:)
-    integer(ip), allocatable :: marker(:), tmp(:)
+    integer(ip), allocatable :: marker(:)
     integer(ip) :: n, s, t, k, e, di, dj, dk, ijk(3), nijk(3), nadj, first
 
     n = dec%nsubdomains
@@ -278,13 +278,7 @@ contains
               t = dec%element_subdomain(dec%mesh%element_gid(nijk))
               if (t == s .or. marker(t) == s) cycle
               marker(t) = s
-              if (nadj == size(adjncy)) then
-                allocate (tmp(2*size(adjncy)))
-                tmp(1:nadj) = adjncy(1:nadj)
-                call move_alloc(tmp, adjncy)
-              end if
-              nadj = nadj + 1
-              adjncy(nadj) = t
+              call append_int(adjncy, nadj, t)
             end do
           end do
         end do

@@ -12,7 +12,7 @@ module subdomain
   implicit none
   private
 
-  public :: build_subdomain, local_node
+  public :: build_subdomain, local_node, node_dofs
 
   !> A subdomain and its system.
   type, public :: subdomain_t
@@ -30,6 +30,19 @@ module subdomain
   end type subdomain_t
 
 contains
+
+  !> The subdomain dofs of the local nodes `nodes`, node by node (dof of
+  !> local node a, component c: 3*(a-1) + c).
+  pure function node_dofs(nodes) result(dofs)
+    integer(ip), intent(in) :: nodes(:)
+    integer(ip) :: dofs(3*size(nodes))
+    integer(ip) :: i, c
+    do i = 1, size(nodes, kind=ip)
+      do c = 1, 3
+        dofs(3*(i - 1) + c) = 3*(nodes(i) - 1) + c
+      end do
+    end do
+  end function node_dofs
 
   !> Geometry of subdomain `id` of `dec`: nodes, coordinates, elements, centroid.
   !> Work proportional to the size of the subdomain.

@@ -75,6 +75,8 @@ module mprgp
   implicit none
   private
 
+  public :: ensure_size
+
   !> A stopping rule asked once per iteration (and at the start) by minimize.
   type, abstract, public :: mprgp_stop_t
   contains
@@ -261,7 +263,7 @@ contains
     class(mprgp_stop_t), intent(inout) :: stop_rule
     integer(ip), intent(in) :: max_hessian
     logical, intent(in) :: gradient_given
-    real(dp) :: stats(4), pair(3), gp, alpha_f, alpha_cg, beta_cg, pap
+    real(dp) :: stats(4), gp, alpha_f, alpha_cg, beta_cg, pap
     logical :: stop
     integer(ip) :: n
 
@@ -321,25 +323,8 @@ contains
       if (stats(2) <= self%gamma**2*stats(3)) then
         ! proportional iterate: try a CG step along p
         alpha_f = feasible_step(problem, x, self%p)
-        call apply_hessian(self, problem, self%p, self%ap)
-        call direction_dots(problem, self%p, self%ap, g, pair)
-        pap = pair(1)
-        if (.not. (ieee_is_finite(pap) .and. ieee_is_finite(pair(2)) .and. .not. ieee_is_nan(alpha_f))) then
-          call set_status(self, qp_status_not_finite, 'non-finite value in p^T A p, g^T p or the feasible step', &
-                          self%n_iterations)
-          exit
-        end if
-        if (pap <= 0) then
-          call set_status(self, qp_status_breakdown, 'p^T A p <= 0 (Hessian not positive definite?)', &
-                          self%n_iterations)
-          exit
-        end if
-        alpha_cg = pair(2)/pap
-        if (.not. ieee_is_finite(alpha_cg)) then
-          call set_status(self, qp_status_not_finite, 'non-finite CG step length', self%n_iterations)
-          exit
-        end if
-        call raise_norm(self, pap, pair(3))
+        if (.not. step_along_p(self, problem, g, .not. ieee_is_nan(alpha_f), 'p', &
+                               'p^T A p, g^T p or the feasible step', 'CG', pap, alpha_cg)) exit
 
         if (alpha_cg <= alpha_f) then
           ! CG step, then p <- phi - beta_cg p with beta_cg = phi^T A p / p^T A p
@@ -367,25 +352,8 @@ contains
       else
         ! proportioning step along beta
         call chopped_gradient(problem, x, g, self%p)
-        call apply_hessian(self, problem, self%p, self%ap)
-        call direction_dots(problem, self%p, self%ap, g, pair)
-        pap = pair(1)
-        if (.not. (ieee_is_finite(pap) .and. ieee_is_finite(pair(2)))) then
-          call set_status(self, qp_status_not_finite, 'non-finite value in beta^T A beta or g^T beta', &
-                          self%n_iterations)
-          exit
-        end if
-        if (pap <= 0) then
-          call set_status(self, qp_status_breakdown, 'beta^T A beta <= 0 (Hessian not positive definite?)', &
-                          self%n_iterations)
-          exit
-        end if
-        alpha_cg = pair(2)/pap
-        if (.not. ieee_is_finite(alpha_cg)) then
-          call set_status(self, qp_status_not_finite, 'non-finite proportioning step length', self%n_iterations)
-          exit
-        end if
-        call raise_norm(self, pap, pair(3))
+        if (.not. step_along_p(self, problem, g, .true., 'beta', 'beta^T A beta or g^T beta', 'proportioning', &
+                               pap, alpha_cg)) exit
         call take_step(problem, x, g, alpha_cg, self%p, self%ap)
         call problem%track_step(alpha_cg)
         self%n_proportioning = self%n_proportioning + 1
@@ -698,7 +666,44 @@ contains
     end if
   end subroutine mprgp_summary
 
-  !> Allocate v with length n unless it already has it (no work inside loops).
+  !> ap = A p for the direction p (`dir` in messages), p^T A p and the step
+  !> length alpha = g^T p / p^T A p of a CG or proportioning step; false,
+  !> with the status set, when p^T A p or g^T p is not finite (or `finite` is
+  !> false), when p^T A p <= 0, or when alpha is not finite. `dots` names the
+  !> values of the first test, `step` the step in the last message.
+  logical function step_along_p(self, problem, g, finite, dir, dots, step, pap, alpha) result(ok)
+    class(mprgp_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(in) :: g(:)
+    logical, intent(in) :: finite
+    character(len=*), intent(in) :: dir, dots, step
+    real(dp), intent(out) :: pap, alpha
+    real(dp) :: pair(3)
+    ok = .false.
+    alpha = 0
+    call apply_hessian(self, problem, self%p, self%ap)
+    call direction_dots(problem, self%p, self%ap, g, pair)
+    pap = pair(1)
+    if (.not. (ieee_is_finite(pap) .and. ieee_is_finite(pair(2)) .and. finite)) then
+      call set_status(self, qp_status_not_finite, 'non-finite value in '//dots, self%n_iterations)
+      return
+    end if
+    if (pap <= 0) then
+      call set_status(self, qp_status_breakdown, dir//'^T A '//dir//' <= 0 (Hessian not positive definite?)', &
+                      self%n_iterations)
+      return
+    end if
+    alpha = pair(2)/pap
+    if (.not. ieee_is_finite(alpha)) then
+      call set_status(self, qp_status_not_finite, 'non-finite '//step//' step length', self%n_iterations)
+      return
+    end if
+    call raise_norm(self, pap, pair(3))
+    ok = .true.
+  end function step_along_p
+
+  !> Allocate v with length n unless it already has it (no work inside loops);
+  !> also SMALBE's work vectors.
   subroutine ensure_size(v, n)
     real(dp), allocatable, intent(inout) :: v(:)
     integer(ip), intent(in) :: n

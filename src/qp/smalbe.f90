@@ -65,7 +65,7 @@ module smalbe
   use qp_problem, only: qp_problem_t, qp_solver_t, qp_message_len, compensated_add, qp_status_converged, &
                         qp_status_max_hessian, qp_status_max_outer, qp_status_not_finite, &
                         qp_status_incompatible, qp_status_not_run
-  use mprgp, only: mprgp_t, mprgp_stop_t
+  use mprgp, only: mprgp_t, mprgp_stop_t, ensure_size
   implicit none
   private
 
@@ -490,15 +490,4 @@ contains
     end if
   end subroutine monitor_summary
 
-  !> Allocate v with length n unless it already has it.
-  subroutine ensure_size(v, n)
-    real(dp), allocatable, intent(inout) :: v(:)
-    integer(ip), intent(in) :: n
-    if (allocated(v)) then
-      if (size(v) == n) return
-      deallocate (v)
-    end if
-    allocate (v(n))
-    v = 0
-  end subroutine ensure_size
 end module smalbe

@@ -9,7 +9,8 @@ program test_io_json_writer
   use kinds, only: dp, ip, i8, path_len
   use assertions, only: assert_true, test_finish
   use json_writer, only: json_writer_t, json_string, json_real, json_integer, json_logical
-  use params, only: params_json, default_params
+  use params, only: default_params
+  use report, only: params_json
   use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_Comm_rank, MPI_Comm_size, MPI_Barrier
   implicit none
 

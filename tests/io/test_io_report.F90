@@ -9,10 +9,10 @@ program test_io_report
   use assertions, only: assert_true, assert_close, test_finish
   use timers, only: timer_stat_t, timer_start, timer_stop, timers_reduce
   use logger, only: logger_init
-  use report, only: print_timing_table, timings_json, memory_json
+  use report, only: print_timing_table, timings_json, memory_json, params_json
   use proc_status, only: proc_status_bytes
   use json_writer, only: json_writer_t
-  use params, only: params_json, default_params
+  use params, only: default_params
   use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_Comm_rank, MPI_Comm_size, MPI_Barrier
   implicit none
 
