@@ -20,6 +20,7 @@ module dual_problem
   use errors, only: fatal_error
   use qp_problem, only: qp_problem_t, no_lower_bound
   use feti_operators, only: feti_t
+  use reconstruction, only: alpha_new
   use mpi_f08, only: MPI_Allreduce, MPI_SUM
   implicit none
   private
@@ -49,41 +50,42 @@ module dual_problem
     procedure :: track_reset
     procedure :: unscaled_multiplier
     procedure :: hessian_norm
+    procedure :: alpha_bar
     procedure :: free
   end type dual_problem_t
 
 contains
 
   !> The problem of `op` (set up) with rho = rho_scale * ||P F P||.
-  subroutine init(this, op, rho_scale)
-    class(dual_problem_t), intent(inout) :: this
+  subroutine init(self, op, rho_scale)
+    class(dual_problem_t), intent(inout) :: self
     type(feti_t), intent(inout), target :: op
     real(dp), intent(in) :: rho_scale
     integer(ip) :: n
-    call this%free()
-    this%op => op
+    call self%free()
+    self%op => op
     n = op%n_own()
-    call this%init_base(op%comm(), n)
-    this%has_equality = .true.
-    this%rho = rho_scale*op%norm_pfp()
+    call self%init_base(op%comm(), n)
+    self%has_equality = .true.
+    self%rho = rho_scale*op%norm_pfp()
     if (.not. (op%norm_pfp() > 0 .and. op%norm_pfp() < huge(1.0_dp))) &
       call fatal_error('the norm of the dual operator P F P is not a positive finite number; '// &
                        '&material young (or &mesh lengths) is probably outside what double precision can handle')
-    if (.not. this%rho > 0) call fatal_error('dual_problem: &solver rho_scale gives no positive penalty')
-    this%scale = op%norm_pfp()
-    allocate (this%px(n), this%fpx(n), this%pfpx(n))
-    allocate (this%last_g(op%n_coarse()), this%last_z(op%n_coarse()), this%x_g(op%n_coarse()), &
-              this%x_z(op%n_coarse()))
-    this%last_valid = .false.
-    this%x_valid = .false.
-    this%tracked_residuals = 0
-    call this%prepare()
+    if (.not. self%rho > 0) call fatal_error('dual_problem: &solver rho_scale gives no positive penalty')
+    self%scale = op%norm_pfp()
+    allocate (self%px(n), self%fpx(n), self%pfpx(n))
+    allocate (self%last_g(op%n_coarse()), self%last_z(op%n_coarse()), self%x_g(op%n_coarse()), &
+              self%x_z(op%n_coarse()))
+    self%last_valid = .false.
+    self%x_valid = .false.
+    self%tracked_residuals = 0
+    call self%prepare()
     ! b = P (d - F lambda~)
-    call op%apply_f(op%lambda_tilde_vector(), this%fpx)
-    this%fpx = op%dual_rhs() - this%fpx
-    call this%apply_projector(this%fpx, this%b, .false.)
-    this%b = this%b/this%scale
-    this%lower = merge(op%lower_bounds(), no_lower_bound, op%is_contact())
+    call op%apply_f(op%lambda_tilde_vector(), self%fpx)
+    self%fpx = op%dual_rhs() - self%fpx
+    call self%apply_projector(self%fpx, self%b, .false.)
+    self%b = self%b/self%scale
+    self%lower = merge(op%lower_bounds(), no_lower_bound, op%is_contact())
   end subroutine init
 
   !> y = (P F P x + rho Q x)/s, with Q x = x - P x.
@@ -98,8 +100,8 @@ contains
   end subroutine hessian
 
   !> Extra set-up of an extension before b is formed (none here).
-  subroutine prepare(this)
-    class(dual_problem_t), intent(inout) :: this
+  subroutine prepare(self)
+    class(dual_problem_t), intent(inout) :: self
   end subroutine prepare
 
   !> y = P x with one coarse solve; with `keep`, G x and (G G^T)^{-1} G x are
@@ -158,6 +160,17 @@ contains
     hessian_norm = max(self%op%norm_pfp(), self%rho)/self%scale
   end function hessian_norm
 
+  !> The rigid body amplitudes by the new formula for this form of the
+  !> equality constraint, from the dual gradient g and the multiplier of the
+  !> scaled QP: Eq. 24, alpha_bar = (G G^T)^{-1} G g - muhat (hat form; the
+  !> explicit G~ overrides it with Eq. 25).
+  subroutine alpha_bar(self, g, mu_scaled, alpha)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: g(:), mu_scaled(:)
+    real(dp), intent(out) :: alpha(:)
+    call alpha_new(self%op, g, self%unscaled_multiplier(mu_scaled), alpha)
+  end subroutine alpha_bar
+
   !> muhat of Eq. (8) from the multiplier of the scaled QP.
   function unscaled_multiplier(self, muhat_scaled) result(muhat)
     class(dual_problem_t), intent(in) :: self
@@ -202,11 +215,11 @@ contains
     call self%op%apply_gt(muhat, y)
   end subroutine eq_apply_t
 
-  subroutine free(this)
-    class(dual_problem_t), intent(inout) :: this
-    call this%free_base()
-    if (allocated(this%px)) deallocate (this%px, this%fpx, this%pfpx)
-    if (allocated(this%last_g)) deallocate (this%last_g, this%last_z, this%x_g, this%x_z)
-    this%op => null()
+  subroutine free(self)
+    class(dual_problem_t), intent(inout) :: self
+    call self%free_base()
+    if (allocated(self%px)) deallocate (self%px, self%fpx, self%pfpx)
+    if (allocated(self%last_g)) deallocate (self%last_g, self%last_z, self%x_g, self%x_z)
+    self%op => null()
   end subroutine free
 end module dual_problem

@@ -20,6 +20,7 @@ module dual_problem_orth
   use timers, only: timer_start, timer_stop
   use dual_problem, only: dual_problem_t
   use orthonormal_coarse, only: orthonormal_coarse_t
+  use reconstruction, only: alpha_orthonormal
   implicit none
   private
 
@@ -31,6 +32,7 @@ module dual_problem_orth
     procedure :: eq_size
     procedure :: eq_residual
     procedure :: eq_apply_t
+    procedure :: alpha_bar
     procedure :: free
   end type dual_problem_orth_t
 
@@ -38,16 +40,12 @@ contains
 
   !> Build the explicit G~ (timer 'orthonormal coarse'). Collective; called by
   !> dual_problem%init before the linear term is formed.
-  subroutine prepare(this)
-    class(dual_problem_orth_t), intent(inout) :: this
-    character(len=200) :: line
+  subroutine prepare(self)
+    class(dual_problem_orth_t), intent(inout) :: self
     call timer_start('orthonormal coarse')
-    call this%op%init_orthonormal(this%orth)
+    call self%op%init_orthonormal(self%orth)
     call timer_stop('orthonormal coarse')
-    write (line, '(a,i0,a,4(es9.2,a))') 'explicit G~ = L^{-1} G: coarse dimension ', this%orth%n, &
-      ', assembly ', this%orth%seconds_assembly, ' s, Cholesky ', this%orth%seconds_factorization, &
-      ' s, columns ', this%orth%seconds_columns, ' s, ', real(this%orth%bytes(), dp)/2.0_dp**20, ' MiB (rank 0)'
-    call log_message(line)
+    call log_message(self%orth%summary())
   end subroutine prepare
 
   !> y = P x = x - G~^T (G~ x): one MPI_Allreduce, no coarse solve. `keep`
@@ -63,7 +61,7 @@ contains
   !> Length of the multiplier: 6N on every rank (replicated).
   integer(ip) function eq_size(self)
     class(dual_problem_orth_t), intent(in) :: self
-    eq_size = self%orth%n
+    eq_size = self%orth%dimension()
   end function eq_size
 
   !> z = G~ x (replicated) and cnorm = ||G~ x|| = ||z||: one MPI_Allreduce.
@@ -73,7 +71,7 @@ contains
     real(dp), intent(out) :: z(:)
     real(dp), intent(out) :: cnorm
     call self%orth%apply(x, z)
-    cnorm = norm2(z(1:self%orth%n))
+    cnorm = norm2(z(1:self%orth%dimension()))
   end subroutine eq_residual
 
   !> y = G~^T mu (local, no communication).
@@ -84,9 +82,18 @@ contains
     call self%orth%apply_t(muhat, y)
   end subroutine eq_apply_t
 
-  subroutine free(this)
-    class(dual_problem_orth_t), intent(inout) :: this
-    call this%orth%free()
-    call this%dual_problem_t%free()
+  !> Eq. 25: alpha~_bar = G~ g - mu in the basis R~, then alpha_bar = L^{-T}
+  !> alpha~_bar (see reconstruction%alpha_orthonormal).
+  subroutine alpha_bar(self, g, mu_scaled, alpha)
+    class(dual_problem_orth_t), intent(inout) :: self
+    real(dp), intent(in) :: g(:), mu_scaled(:)
+    real(dp), intent(out) :: alpha(:)
+    call alpha_orthonormal(self%orth, g, self%unscaled_multiplier(mu_scaled), alpha)
+  end subroutine alpha_bar
+
+  subroutine free(self)
+    class(dual_problem_orth_t), intent(inout) :: self
+    call self%orth%free()
+    call self%dual_problem_t%free()
   end subroutine free
 end module dual_problem_orth

@@ -76,7 +76,7 @@ contains
     real(dp), intent(out), optional :: alpha_tilde_bar(:)
     real(dp), allocatable :: z(:)
     call timer_start('rec new')
-    allocate (z(orth%n))
+    allocate (z(orth%dimension()))
     call orth%apply(g, z)                 ! alpha~ = G~ g          (Eq. 14, basis R~)
     z = z - mu                            ! alpha~_bar = alpha~ - mu (Eq. 25)
     if (present(alpha_tilde_bar)) alpha_tilde_bar = z
@@ -127,7 +127,7 @@ contains
     t0 = MPI_Wtime()
     call active_contact_mask(op, lambda, active_tol, mask, cost%active_rows)
     call op%init_active_coarse(active_cp, mask)
-    cost%factorization = active_cp%seconds_factorization
+    cost%factorization = active_cp%factorization_seconds()
     cost%assembly = MPI_Wtime() - t0 - cost%factorization
     t0 = MPI_Wtime()
     ga = merge(g, 0.0_dp, mask)

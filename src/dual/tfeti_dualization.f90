@@ -17,8 +17,7 @@ module tfeti_dualization
   use smalbe, only: smalbe_settings_t
   use dual_problem, only: dual_problem_t
   use dual_problem_orth, only: dual_problem_orth_t
-  use reconstruction, only: dual_gradient, alpha_new, alpha_orthonormal, alpha_standard, standard_cost_t, &
-                            coarse_vector_norm
+  use reconstruction, only: dual_gradient, alpha_standard, standard_cost_t, coarse_vector_norm
   use kkt, only: kkt_residuals_t, check_kkt
   use mpi_f08, only: MPI_Comm, MPI_Comm_size, MPI_Allreduce, MPI_IN_PLACE, MPI_MAX
   implicit none
@@ -159,14 +158,7 @@ contains
     call timer_stop('dual gradient')
     a_new = 0
     a_std = 0
-    if (this%method /= 'standard') then
-      select type (d => this%dual)
-      type is (dual_problem_orth_t)
-        call alpha_orthonormal(d%orth, g, d%unscaled_multiplier(mu_scaled), a_new)
-      class default
-        call alpha_new(this%op, g, d%unscaled_multiplier(mu_scaled), a_new)
-      end select
-    end if
+    if (this%method /= 'standard') call this%dual%alpha_bar(g, mu_scaled, a_new)   ! Eq. 24 or 25
     if (this%method /= 'new') then
       call alpha_standard(this%op, sol%lambda, g, this%active_tol, a_std, sol%standard_cost)
       write (line, '(a,3(es10.3,a))') 'standard formula: assembly ', sol%standard_cost%assembly, &

@@ -45,6 +45,7 @@ module coarse_problem
   end type coarse_layout_t
 
   type, public :: coarse_problem_t
+    private
     type(MPI_Comm) :: comm
     type(coarse_layout_t) :: layout
     integer(ip) :: n = 0                    !< coarse dimension 6*nsub
@@ -58,6 +59,7 @@ module coarse_problem
   contains
     procedure :: init
     procedure :: solve
+    procedure :: factorization_seconds
     procedure :: free
   end type coarse_problem_t
 
@@ -311,6 +313,12 @@ contains
                         6*this%layout%nlocal, MPI_REAL_DP, 0, this%comm, ierr)
     end if
   end subroutine solve
+
+  !> Seconds of the MUMPS analysis and factorization in `init`.
+  real(dp) function factorization_seconds(this)
+    class(coarse_problem_t), intent(in) :: this
+    factorization_seconds = this%seconds_factorization
+  end function factorization_seconds
 
   subroutine free(this)
     class(coarse_problem_t), intent(inout) :: this

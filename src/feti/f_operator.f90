@@ -4,6 +4,7 @@
 !> passed in: F owns only K^+ and its work vector. Timer 'F action'.
 module f_operator
   use kinds, only: dp, ip, i8
+  use errors, only: fatal_error
   use timers, only: timer_start, timer_stop
   use subdomain, only: subdomain_t
   use local_inverse, only: local_inverse_t
@@ -67,6 +68,8 @@ contains
   subroutine local_solve(this, x)
     class(f_operator_t), intent(inout) :: this
     real(dp), intent(inout) :: x(:)
+    if (size(x) /= size(this%xall)) call fatal_error('f_operator%local_solve: x must have the length of '// &
+                                                     'the concatenated local vectors')
     call this%kinv%solve(x)
   end subroutine local_solve
 

@@ -83,6 +83,7 @@ module orthonormal_coarse
   !> G G^T = L L^T (replicated) and this rank's columns of G~ = L^{-1} G.
   !> Work arrays are allocated in `init`; the operators allocate nothing.
   type, public :: orthonormal_coarse_t
+    private
     type(MPI_Comm) :: comm
     integer(ip) :: n = 0                          !< coarse dimension 6N
     integer(ip) :: nsub = 0                       !< N
@@ -100,9 +101,11 @@ module orthonormal_coarse
     real(dp) :: seconds_assembly = 0              !< G G^T: exchange, products, Allreduce
     real(dp) :: seconds_factorization = 0         !< dpotrf
     real(dp) :: seconds_columns = 0               !< G~ columns (dtrsm)
-    real(dp), allocatable, private :: xs(:), ys(:), zw(:)
+    real(dp), allocatable :: xs(:), ys(:), zw(:)
   contains
     procedure :: init
+    procedure :: dimension
+    procedure :: summary
     procedure :: apply
     procedure :: apply_t
     procedure :: project
@@ -313,6 +316,21 @@ contains
       zloc(6*ls - 5:6*ls) = z(6*p - 5:6*p)
     end do
   end subroutine to_local
+
+  !> The coarse dimension 6N (the length of the replicated multiplier).
+  integer(ip) function dimension(this)
+    class(orthonormal_coarse_t), intent(in) :: this
+    dimension = this%n
+  end function dimension
+
+  !> One line on the set-up: dimension, the times of its parts, the memory.
+  function summary(this) result(line)
+    class(orthonormal_coarse_t), intent(in) :: this
+    character(len=200) :: line
+    write (line, '(a,i0,a,4(es9.2,a))') 'explicit G~ = L^{-1} G: coarse dimension ', this%n, &
+      ', assembly ', this%seconds_assembly, ' s, Cholesky ', this%seconds_factorization, &
+      ' s, columns ', this%seconds_columns, ' s, ', real(this%bytes(), dp)/2.0_dp**20, ' MiB (rank 0)'
+  end function summary
 
   !> Bytes held on this rank (L and the blocks of G~).
   integer(i8) function bytes(this)

@@ -479,35 +479,24 @@ contains
       decomposition = p%mesh%decomposition; mapping = p%mesh%mapping
       if (reading) read (group_text, nml=mesh, iostat=status, iomsg=msg)
       if (.not. reading) write (written, nml=mesh, delim='quote', iostat=status, iomsg=msg)
-      if (.not. reading) return
-      p%mesh = mesh_params_t(nsub, nel, lengths, distortion, distortion_seed, &
-                             lower(decomposition), lower(mapping))
     case ('material')
       young = p%material%young; poisson = p%material%poisson
       variation = p%material%variation; contrast = p%material%contrast; seed = p%material%seed
       if (reading) read (group_text, nml=material, iostat=status, iomsg=msg)
       if (.not. reading) write (written, nml=material, delim='quote', iostat=status, iomsg=msg)
-      if (.not. reading) return
-      p%material = material_params_t(young, poisson, lower(variation), contrast, seed)
     case ('load')
       top_pressure = p%load%top_pressure
       if (reading) read (group_text, nml=load, iostat=status, iomsg=msg)
       if (.not. reading) write (written, nml=load, delim='quote', iostat=status, iomsg=msg)
-      if (.not. reading) return
-      p%load = load_params_t(top_pressure)
     case ('boundary')
       top_dirichlet = p%boundary%top_dirichlet; top_displacement = p%boundary%top_displacement
       symmetry_x0 = p%boundary%symmetry_x0; symmetry_y0 = p%boundary%symmetry_y0
       if (reading) read (group_text, nml=boundary, iostat=status, iomsg=msg)
       if (.not. reading) write (written, nml=boundary, delim='quote', iostat=status, iomsg=msg)
-      if (.not. reading) return
-      p%boundary = boundary_params_t(top_dirichlet, top_displacement, symmetry_x0, symmetry_y0)
     case ('obstacle')
       shape = p%obstacle%shape; radius = p%obstacle%radius; gap = p%obstacle%gap
       if (reading) read (group_text, nml=obstacle, iostat=status, iomsg=msg)
       if (.not. reading) write (written, nml=obstacle, delim='quote', iostat=status, iomsg=msg)
-      if (.not. reading) return
-      p%obstacle = obstacle_params_t(lower(shape), radius, gap)
     case ('solver')
       associate (s => p%solver)
         tol = s%tol; max_outer = s%max_outer; max_hessian = s%max_hessian; gamma = s%gamma
@@ -520,24 +509,38 @@ contains
       end associate
       if (reading) read (group_text, nml=solver, iostat=status, iomsg=msg)
       if (.not. reading) write (written, nml=solver, delim='quote', iostat=status, iomsg=msg)
-      if (.not. reading) return
-      p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
-                                 rho_scale, m_scale, beta, eta_scale, power_iterations, lower(coarse), &
-                                 lower(local_ordering), lower(local_solver), lower(coarse_placement), &
-                                 regularization, lower(scaling), monitor)
     case ('reconstruction')
       method = p%reconstruction%method; active_tol = p%reconstruction%active_tol
       kkt_tol = p%reconstruction%kkt_tol
       if (reading) read (group_text, nml=reconstruction, iostat=status, iomsg=msg)
       if (.not. reading) write (written, nml=reconstruction, delim='quote', iostat=status, iomsg=msg)
-      if (.not. reading) return
-      p%reconstruction = reconstruction_params_t(lower(method), active_tol, kkt_tol)
     case ('output')
       directory = p%output%directory; run_name = p%output%run_name
       write_hdf5 = p%output%write_hdf5; write_report = p%output%write_report
       if (reading) read (group_text, nml=output, iostat=status, iomsg=msg)
       if (.not. reading) write (written, nml=output, delim='quote', iostat=status, iomsg=msg)
-      if (.not. reading) return
+    end select
+    if (.not. reading) return
+    select case (name)
+    case ('mesh')
+      p%mesh = mesh_params_t(nsub, nel, lengths, distortion, distortion_seed, &
+                             lower(decomposition), lower(mapping))
+    case ('material')
+      p%material = material_params_t(young, poisson, lower(variation), contrast, seed)
+    case ('load')
+      p%load = load_params_t(top_pressure)
+    case ('boundary')
+      p%boundary = boundary_params_t(top_dirichlet, top_displacement, symmetry_x0, symmetry_y0)
+    case ('obstacle')
+      p%obstacle = obstacle_params_t(lower(shape), radius, gap)
+    case ('solver')
+      p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
+                                 rho_scale, m_scale, beta, eta_scale, power_iterations, lower(coarse), &
+                                 lower(local_ordering), lower(local_solver), lower(coarse_placement), &
+                                 regularization, lower(scaling), monitor)
+    case ('reconstruction')
+      p%reconstruction = reconstruction_params_t(lower(method), active_tol, kkt_tol)
+    case ('output')
       p%output = output_params_t(directory, run_name, write_hdf5, write_report)
     end select
   end subroutine group_namelist
@@ -846,30 +849,22 @@ contains
     s = trim(text(i:min(len(text), i + 30)))
   end function snippet
 
+  !> The values of v separated by blanks (for messages).
   function ints(v) result(s)
     integer(ip), intent(in) :: v(:)
     character(len=:), allocatable :: s
-    character(len=24) :: buf
-    integer :: k
-    s = ''
-    do k = 1, size(v)
-      write (buf, '(i0)') v(k)
-      s = s//trim(buf)
-      if (k < size(v)) s = s//' '
-    end do
+    character(len=256) :: buf
+    write (buf, '(*(i0,:," "))') v
+    s = trim(buf)
   end function ints
 
+  !> The values of v separated by blanks, 6 significant digits.
   function reals(v) result(s)
     real(dp), intent(in) :: v(:)
     character(len=:), allocatable :: s
-    character(len=32) :: buf
-    integer :: k
-    s = ''
-    do k = 1, size(v)
-      write (buf, '(g0.6)') v(k)
-      s = s//trim(adjustl(buf))
-      if (k < size(v)) s = s//' '
-    end do
+    character(len=256) :: buf
+    write (buf, '(*(g0.6,:," "))') v
+    s = trim(buf)
   end function reals
 
 

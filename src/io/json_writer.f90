@@ -18,6 +18,7 @@
 module json_writer
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use kinds, only: dp, ip, i8
+  use text, only: str
   use errors, only: fatal_error
   use file_system, only: rename_file
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank
@@ -46,6 +47,8 @@ module json_writer
     generic :: add => add_real, add_integer, add_long, add_logical, add_string, add_reals, add_integers
     procedure, private :: append_real, append_integer, append_long, append_logical, append_string
     generic :: append => append_real, append_integer, append_long, append_logical, append_string
+    procedure, private :: add_each_real, add_each_long
+    generic :: add_each => add_each_real, add_each_long
     procedure :: add_raw
     procedure :: append_raw
     procedure :: add_null
@@ -110,9 +113,7 @@ contains
   pure function json_integer(n) result(json)
     integer(i8), intent(in) :: n
     character(len=:), allocatable :: json
-    character(len=24) :: buf
-    write (buf, '(i0)') n
-    json = trim(buf)
+    json = str(n)
   end function json_integer
 
   !> true or false.
@@ -277,6 +278,27 @@ contains
     character(len=*), intent(in) :: key
     call add_raw(self, key, 'null')
   end subroutine add_null
+
+  !> One member per key: keys(k) with values(k) (a table of figures).
+  subroutine add_each_real(self, keys, values)
+    class(json_writer_t), intent(inout) :: self
+    character(len=*), intent(in) :: keys(:)
+    real(dp), intent(in) :: values(:)
+    integer :: k
+    do k = 1, size(keys)
+      call add_raw(self, trim(keys(k)), json_real(values(k)))
+    end do
+  end subroutine add_each_real
+
+  subroutine add_each_long(self, keys, values)
+    class(json_writer_t), intent(inout) :: self
+    character(len=*), intent(in) :: keys(:)
+    integer(i8), intent(in) :: values(:)
+    integer :: k
+    do k = 1, size(keys)
+      call add_raw(self, trim(keys(k)), json_integer(values(k)))
+    end do
+  end subroutine add_each_long
 
   subroutine add_real(self, key, value)
     class(json_writer_t), intent(inout) :: self

@@ -13,6 +13,7 @@
 !> transposes, e.g. coordinates(3, nnodes).
 module xdmf
   use kinds, only: i8
+  use text, only: str
   implicit none
   private
 
@@ -43,18 +44,10 @@ contains
       '      <Topology TopologyType="Hexahedron" NumberOfElements="'//str(nelem)//'" NodesPerElement="8">', &
       data_item(h5, 'connectivity', nelem, 8, 'Int', 4), &
       '      </Topology>', &
-      '      <Geometry GeometryType="XYZ">', &
-      data_item(h5, 'coordinates', nnodes, 3, 'Float', 8), &
-      '      </Geometry>', &
-      '      <Attribute Name="displacement" AttributeType="Vector" Center="Node">', &
-      data_item(h5, 'displacement', nnodes, 3, 'Float', 8), &
-      '      </Attribute>', &
-      '      <Attribute Name="subdomain" AttributeType="Scalar" Center="Cell">', &
-      data_item(h5, 'subdomain', nelem, 0, 'Int', 4), &
-      '      </Attribute>', &
-      '      <Attribute Name="von_mises" AttributeType="Scalar" Center="Cell">', &
-      data_item(h5, 'von_mises', nelem, 0, 'Float', 8), &
-      '      </Attribute>', &
+      geometry(h5, 'coordinates', nnodes), &
+      attribute(h5, 'displacement', 'Vector', 'Node', nnodes, 3, 'Float', 8), &
+      attribute(h5, 'subdomain', 'Scalar', 'Cell', nelem, 0, 'Int', 4), &
+      attribute(h5, 'von_mises', 'Scalar', 'Cell', nelem, 0, 'Float', 8), &
       '    </Grid>'
     if (status /= 0) return
     if (ncontact > 0) then
@@ -64,15 +57,9 @@ contains
         '" NodesPerElement="1">', &
         data_item(h5, 'contact_vertices', ncontact, 0, 'Int', 4), &
         '      </Topology>', &
-        '      <Geometry GeometryType="XYZ">', &
-        data_item(h5, 'contact_coordinates', ncontact, 3, 'Float', 8), &
-        '      </Geometry>', &
-        '      <Attribute Name="contact_pressure" AttributeType="Scalar" Center="Node">', &
-        data_item(h5, 'contact_pressure', ncontact, 0, 'Float', 8), &
-        '      </Attribute>', &
-        '      <Attribute Name="contact_gap" AttributeType="Scalar" Center="Node">', &
-        data_item(h5, 'contact_gap', ncontact, 0, 'Float', 8), &
-        '      </Attribute>', &
+        geometry(h5, 'contact_coordinates', ncontact), &
+        attribute(h5, 'contact_pressure', 'Scalar', 'Node', ncontact, 0, 'Float', 8), &
+        attribute(h5, 'contact_gap', 'Scalar', 'Node', ncontact, 0, 'Float', 8), &
         '    </Grid>'
       if (status /= 0) return
     end if
@@ -80,6 +67,27 @@ contains
     if (status /= 0) return
     close (u, iostat=status, iomsg=msg)
   end subroutine write_xdmf
+
+  !> The Geometry element (XYZ) from dataset /`name` of `rows` x 3.
+  function geometry(h5, name, rows) result(lines)
+    character(len=*), intent(in) :: h5, name
+    integer(i8), intent(in) :: rows
+    character(len=:), allocatable :: lines
+    lines = '      <Geometry GeometryType="XYZ">'//new_line('a')//data_item(h5, name, rows, 3, 'Float', 8)// &
+            new_line('a')//'      </Geometry>'
+  end function geometry
+
+  !> An Attribute element `name` (`kind` Scalar or Vector, `center` Node or
+  !> Cell) from the dataset of the same name.
+  function attribute(h5, name, kind, center, rows, columns, number_type, precision) result(lines)
+    character(len=*), intent(in) :: h5, name, kind, center, number_type
+    integer(i8), intent(in) :: rows
+    integer, intent(in) :: columns, precision
+    character(len=:), allocatable :: lines
+    lines = '      <Attribute Name="'//name//'" AttributeType="'//kind//'" Center="'//center//'">'// &
+            new_line('a')//data_item(h5, name, rows, columns, number_type, precision)//new_line('a')// &
+            '      </Attribute>'
+  end function attribute
 
   !> One DataItem line for dataset /`name` of `rows` x `columns` (a vector
   !> of `rows` when `columns` is 0).
@@ -94,13 +102,6 @@ contains
            str(int(precision, i8))//'" Format="HDF">'//h5//':/'//name//'</DataItem>'
   end function data_item
 
-  function str(n) result(s)
-    integer(i8), intent(in) :: n
-    character(len=:), allocatable :: s
-    character(len=24) :: buf
-    write (buf, '(i0)') n
-    s = trim(buf)
-  end function str
 
   !> `s` with the characters XML reserves replaced by entities.
   function xml_escape(s) result(r)

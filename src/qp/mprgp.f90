@@ -296,7 +296,7 @@ contains
       call problem%track_last()
       g(1:n) = g(1:n) - b_lin(1:n)
     end if
-    call free_gradient(problem, x, g, self%p)
+    call gradient_part(problem, x, g, .false., self%p)
     call split_stats(self, problem, x, g, stats)
 
     do
@@ -346,18 +346,18 @@ contains
           self%n_expansion = self%n_expansion + 1
           call expand(self, problem, b_lin, x, g, max_hessian)
           if (self%status /= qp_status_not_run) exit
-          call free_gradient(problem, x, g, self%p)
+          call gradient_part(problem, x, g, .false., self%p)
           call split_stats(self, problem, x, g, stats)
         end if
       else
         ! proportioning step along beta
-        call chopped_gradient(problem, x, g, self%p)
+        call gradient_part(problem, x, g, .true., self%p)
         if (.not. step_along_p(self, problem, g, .true., 'beta', 'beta^T A beta or g^T beta', 'proportioning', &
                                pap, alpha_cg)) exit
         call take_step(problem, x, g, alpha_cg, self%p, self%ap)
         call problem%track_step(alpha_cg)
         self%n_proportioning = self%n_proportioning + 1
-        call free_gradient(problem, x, g, self%p)
+        call gradient_part(problem, x, g, .false., self%p)
         call split_stats(self, problem, x, g, stats)
       end if
       self%n_iterations = self%n_iterations + 1
@@ -380,7 +380,7 @@ contains
     n = problem%n
     budget = max_hessian - self%n_hessian
     if (budget < 1) return
-    call free_gradient(problem, x, g, self%w_phi)
+    call gradient_part(problem, x, g, .false., self%w_phi)
 
     if (self%expansion == 'optimal' .and. budget >= 2) then
       call apply_hessian(self, problem, self%w_phi, self%ap)
@@ -527,29 +527,24 @@ contains
     end do
   end subroutine projected_step
 
-  !> The free gradient phi(x) into v.
-  subroutine free_gradient(problem, x, g, v)
+  !> The free gradient phi(x) (`chopped` false: g where x_i > l_i) or the
+  !> chopped gradient beta(x) (`chopped` true: min(g, 0) where x_i <= l_i)
+  !> into v, 0 elsewhere.
+  subroutine gradient_part(problem, x, g, chopped, v)
     class(qp_problem_t), intent(in) :: problem
     real(dp), intent(in) :: x(:), g(:)
+    logical, intent(in) :: chopped
     real(dp), intent(inout) :: v(:)
     integer(ip) :: i
     do i = 1, problem%n
       v(i) = 0
-      if (x(i) > problem%lower(i)) v(i) = g(i)
+      if (chopped) then
+        if (x(i) <= problem%lower(i)) v(i) = min(g(i), 0.0_dp)
+      else
+        if (x(i) > problem%lower(i)) v(i) = g(i)
+      end if
     end do
-  end subroutine free_gradient
-
-  !> The chopped gradient beta(x) into v.
-  subroutine chopped_gradient(problem, x, g, v)
-    class(qp_problem_t), intent(in) :: problem
-    real(dp), intent(in) :: x(:), g(:)
-    real(dp), intent(inout) :: v(:)
-    integer(ip) :: i
-    do i = 1, problem%n
-      v(i) = 0
-      if (x(i) <= problem%lower(i)) v(i) = min(g(i), 0.0_dp)
-    end do
-  end subroutine chopped_gradient
+  end subroutine gradient_part
 
   !> p <- phi(x) - beta_cg p.
   subroutine conjugate(problem, x, g, beta_cg, p)

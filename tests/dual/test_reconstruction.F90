@@ -150,7 +150,7 @@ contains
     call solve_dual(p, op, orth, orth%rho, orth%scale, tol, nu, mu, label//' (cholesky)')
     lambda = nu + op%lambda_tilde_vector()
     call dual_gradient(op, lambda, g)
-    allocate (at(orth%orth%n), full(orth%orth%n))
+    allocate (at(orth%orth%dimension()), full(orth%orth%dimension()))
     call alpha_orthonormal(orth%orth, g, mu, a_orth, at)
     ! Eq. 24 with the same pair: muhat = L^{-T} mu
     full = mu
@@ -272,7 +272,7 @@ contains
     integer(ip) :: k, n
     ! G~ = L^{-1} G and P with L L^T = G G^T: exact to c eps cond(G G^T)
     tol_gg = solve_tol(coarse_condition(op))
-    n = orth%orth%n
+    n = orth%orth%dimension()
     allocate (x(op%n_own()), px(op%n_own()), ppx(op%n_own()), qx(op%n_own()), z(op%n_coarse()), &
               e(n), y(op%n_own()), col(n))
     call op%keyed_random(11, x)

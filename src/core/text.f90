@@ -1,0 +1,29 @@
+!> Numbers as text, the one place for it (i0 formatting).
+module text
+  use kinds, only: ip, i8
+  implicit none
+  private
+
+  public :: str
+
+  !> `n` in decimal, no blanks.
+  interface str
+    module procedure str_ip, str_i8
+  end interface str
+
+contains
+
+  pure function str_i8(n) result(s)
+    integer(i8), intent(in) :: n
+    character(len=:), allocatable :: s
+    character(len=24) :: buf
+    write (buf, '(i0)') n
+    s = trim(buf)
+  end function str_i8
+
+  pure function str_ip(n) result(s)
+    integer(ip), intent(in) :: n
+    character(len=:), allocatable :: s
+    s = str_i8(int(n, i8))
+  end function str_ip
+end module text
