@@ -13,6 +13,7 @@ module b_operator
   use decomposition, only: decomposition_t
   use subdomain, only: subdomain_t
   use constraints, only: constraints_t, build_constraints, row_contact
+  use mpi_f08, only: MPI_Comm
   implicit none
   private
 
@@ -58,7 +59,6 @@ contains
   !> Build B, c and G^T = B R of the local subdomains `subs` (which hold
   !> their geometry and R). Collective over `comm`.
   subroutine init(this, p, dec, subs, comm)
-    use mpi_f08, only: MPI_Comm
     class(b_operator_t), intent(inout) :: this
     type(params_t), intent(in) :: p
     type(decomposition_t), intent(in) :: dec
