@@ -908,7 +908,7 @@ def submit_slurm(args, plan, out, program):
     """One job script per member and rank count (its repetitions run one after the other inside
     it); submitted unless --dry-run; never a second job for runs pending, running or done."""
     data = load_jobs(out)
-    states = squeue_states() if data["jobs"] and not args.dry_run else {}
+    states = squeue_states() if any(j.get("job_id") for j in data["jobs"]) else {}
     current = {id(job): state for job, _, state in survey(out, data, states)}
     groups = {}
     for member, np_, rep in plan:

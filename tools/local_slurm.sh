@@ -11,7 +11,8 @@
 #   tools/local_slurm.sh env      prints `export SLURM_CONF=...`: eval "$(tools/local_slurm.sh env)"
 #
 # Everything lives in one folder of its own, $FETICONTACT_SLURM_DIR (default: build/local-slurm
-# in the repository): slurm.conf, a munge key and socket, state, spool, pid and log files. A
+# in the repository): slurm.conf, a munge key and socket, state, spool, pid and log files (the
+# last three in /run/feticontact-slurm-* when that folder's path is too long for sockets). A
 # configuration under /etc/slurm or /etc/munge is never read or written; clients find this one
 # through SLURM_CONF (sbatch, squeue, ... and tools/campaign.py).
 #
@@ -26,6 +27,14 @@ DIR=${FETICONTACT_SLURM_DIR:-$ROOT/build/local-slurm}
 CONF=$DIR/slurm.conf
 PACKAGES=(slurmctld slurmd slurm-client munge)
 CANNOT=77
+# Unix sockets (munged's; slurmd's spool holds one per job step, named <node>_<job>.<step>) must
+# have paths under 108 bytes: they live in DIR, or in /run/feticontact-slurm-<checksum of DIR>
+# when DIR's path is too long for that
+SOCKETS=$DIR
+if [ $((${#DIR} + $(hostname -s | wc -c))) -gt 70 ]; then
+  SOCKETS=/run/feticontact-slurm-$(printf %s "$DIR" | cksum | cut -d' ' -f1)
+fi
+MUNGE=$SOCKETS/munge
 
 say() { echo "local_slurm: $*" >&2; }
 cannot() { say "cannot start Slurm here: $*"; exit $CANNOT; }
@@ -91,9 +100,9 @@ SlurmUser=root
 SlurmdUser=root
 AuthType=auth/munge
 CredType=cred/munge
-AuthInfo=socket=$DIR/munge/munge.socket.2
+AuthInfo=socket=$MUNGE/munge.socket.2
 StateSaveLocation=$DIR/state
-SlurmdSpoolDir=$DIR/spool
+SlurmdSpoolDir=$SOCKETS/spool
 SlurmctldPidFile=$DIR/run/slurmctld.pid
 SlurmdPidFile=$DIR/run/slurmd.pid
 SlurmctldLogFile=$DIR/log/slurmctld.log
@@ -125,7 +134,7 @@ EOF
 
 start_munge() {
   # munge/ holds the socket (everyone may connect), munge/private/ the key, seed and log
-  local m=$DIR/munge p=$DIR/munge/private
+  local m=$MUNGE p=$MUNGE/private
   if pid_of "$DIR/run/munged.pid" munged >/dev/null; then return 0; fi
   id munge >/dev/null 2>&1 || cannot "no munge user (package munge not installed?)"
   mkdir -p "$p"
@@ -165,7 +174,7 @@ wait_idle() {
 
 cmd_start() {
   [ "$(id -u)" -eq 0 ] || cannot "needs root (munged runs as the munge user, slurmd as root)"
-  mkdir -p "$DIR"/{state,spool,run,log}
+  mkdir -p "$DIR"/{state,run,log} "$SOCKETS/spool"
   install_packages
   local node
   if pid_of "$DIR/run/slurmctld.pid" slurmctld >/dev/null; then
