@@ -4,10 +4,11 @@
 program test_params
   use kinds, only: dp, ip, path_len
   use assertions, only: assert_true, assert_equal, assert_close, test_finish
-  use params, only: params_t, read_params, check_params, default_params
+  use params, only: params_t, read_params, check_params, default_params, param_item_t, param_items, group_names
   use mpi_f08, only: MPI_Init, MPI_COMM_WORLD
   implicit none
   type(params_t) :: p, d
+  type(param_item_t), allocatable :: items(:)
   character(len=path_len) :: file
   integer :: ierr, status
   character(len=1024) :: msg
@@ -50,5 +51,21 @@ program test_params
   d%material%poisson = 0.5_dp
   call check_params(d, status, msg)
   call assert_true(status /= 0 .and. index(msg, 'variable poisson') > 0, 'poisson = 0.5 refused', HERE)
+
+  ! the table behind the echo and report.json: names, kinds, values, also of
+  ! a string with the characters the namelist syntax uses
+  d = default_params()
+  d%output%directory = 'out/a, b = "c" /d'
+  call param_items(d, 'output', items)
+  call assert_equal(4, size(items), 'output: 4 variables', HERE)
+  call assert_true(items(1)%name == 'directory' .and. items(1)%kind == 's' .and. items(1)%n == 1 .and. &
+                   items(1)%values(1) == 'out/a, b = "c" /d', 'directory read back whole', HERE)
+  call assert_true(items(3)%name == 'write_hdf5' .and. items(3)%kind == 'l' .and. items(3)%values(1) == 'T', &
+                   'write_hdf5 a logical', HERE)
+  call param_items(d, 'mesh', items)
+  call assert_true(items(1)%name == 'nsub' .and. items(1)%kind == 'i' .and. items(1)%n == 3, 'nsub: 3 integers', HERE)
+  call assert_true(items(3)%name == 'lengths' .and. items(3)%kind == 'r' .and. items(3)%n == 3, &
+                   'lengths: 3 reals (repeat count expanded)', HERE)
+  call assert_equal(8, size(group_names), 'eight groups', HERE)
   call test_finish()
 end program test_params
