@@ -7,13 +7,24 @@ module sorting
   implicit none
   private
 
-  public :: sort_ints, sort_unique, binary_search, sort_permutation, append_int
+  public :: sort_ints, sort_unique, binary_search, sort_permutation, append_int, append_unmarked
 
   interface sort_permutation
     module procedure sort_permutation_i8, sort_permutation_ip
   end interface sort_permutation
 
 contains
+
+  !> append_int(v, n, x) unless marker(x) == tag, then marker(x) = tag: the
+  !> distinct entries of one adjacency list (a new tag per list).
+  pure subroutine append_unmarked(v, n, x, marker, tag)
+    integer(ip), allocatable, intent(inout) :: v(:)
+    integer(ip), intent(inout) :: n, marker(:)
+    integer(ip), intent(in) :: x, tag
+    if (marker(x) == tag) return
+    marker(x) = tag
+    call append_int(v, n, x)
+  end subroutine append_unmarked
 
   !> v(n+1) = x, n = n + 1; v grows (doubles) when full.
   pure subroutine append_int(v, n, x)

@@ -12,7 +12,7 @@ module assembly
                         von_mises, q1_face_nodes
   use materials, only: subdomain_material
   use rigid_modes, only: rigid_body_modes
-  use sorting, only: sort_ints, append_int
+  use sorting, only: sort_ints, append_unmarked
   implicit none
   private
 
@@ -82,10 +82,7 @@ contains
       first = nadj + 1
       do k = nptr(a), nptr(a + 1) - 1
         do i = 1, 8
-          b = sub%elem_nodes(i, nelems(k))
-          if (marker(b) == a) cycle
-          marker(b) = a
-          call append_int(adj, nadj, b)
+          call append_unmarked(adj, nadj, sub%elem_nodes(i, nelems(k)), marker, a)
         end do
       end do
       call sort_ints(adj(first:nadj))

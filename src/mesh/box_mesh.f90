@@ -37,6 +37,7 @@ module box_mesh
     procedure :: node_gid
     procedure :: element_ijk
     procedure :: element_gid
+    procedure :: elements_near
     procedure :: node_coords
     procedure :: element_nodes
     procedure :: node_on_face
@@ -115,6 +116,28 @@ contains
     integer(ip), intent(in) :: ijk(3)
     element_gid = 1 + ijk(1) + this%ng(1)*(ijk(2) + this%ng(2)*ijk(3))
   end function element_gid
+
+  !> The gids of the elements (i,j,k) + (di,dj,dk) with lo <= di,dj,dk <= hi
+  !> that lie in the mesh, dk slowest then dj then di: gids(1:n). The
+  !> elements around a node (i,j,k): lo = -1, hi = 0; the neighbours of an
+  !> element and itself: lo = -1, hi = 1.
+  pure subroutine elements_near(this, ijk, lo, hi, gids, n)
+    class(box_mesh_t), intent(in) :: this
+    integer(ip), intent(in) :: ijk(3), lo, hi
+    integer(ip), intent(out) :: gids(27), n
+    integer(ip) :: di, dj, dk, e(3)
+    n = 0
+    do dk = lo, hi
+      do dj = lo, hi
+        do di = lo, hi
+          e = ijk + [di, dj, dk]
+          if (any(e < 0) .or. any(e >= this%ng)) cycle
+          n = n + 1
+          gids(n) = this%element_gid(e)
+        end do
+      end do
+    end do
+  end subroutine elements_near
 
   !> The 8 node gids of element `gid` in Q1 order.
   pure function element_nodes(this, gid) result(nodes)

@@ -18,7 +18,7 @@ module decomposition
   use logger, only: log_message
   use params, only: params_t
   use metis_wrapper, only: metis_part_mesh_dual, metis_part_graph_kway
-  use sorting, only: sort_ints, append_int
+  use sorting, only: sort_ints, append_unmarked
   use box_mesh, only: box_mesh_t, box_mesh_init
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast
   implicit none
@@ -258,7 +258,7 @@ contains
     type(decomposition_t), intent(in) :: dec
     integer(ip), allocatable, intent(out) :: xadj(:), adjncy(:)
     integer(ip), allocatable :: marker(:)
-    integer(ip) :: n, s, t, k, e, di, dj, dk, ijk(3), nijk(3), nadj, first
+    integer(ip) :: n, s, t, k, e, m, near(27), nnear, nadj, first
 
     n = dec%nsubdomains
     allocate (xadj(n + 1), marker(n), adjncy(max(16, 8*n)))
@@ -269,18 +269,10 @@ contains
       first = nadj + 1
       do k = dec%subdomain_element_ptr(s), dec%subdomain_element_ptr(s + 1) - 1
         e = dec%subdomain_elements(k)
-        ijk = dec%mesh%element_ijk(e)
-        do dk = -1, 1
-          do dj = -1, 1
-            do di = -1, 1
-              nijk = ijk + [di, dj, dk]
-              if (any(nijk < 0) .or. any(nijk >= dec%mesh%ng)) cycle
-              t = dec%element_subdomain(dec%mesh%element_gid(nijk))
-              if (t == s .or. marker(t) == s) cycle
-              marker(t) = s
-              call append_int(adjncy, nadj, t)
-            end do
-          end do
+        call dec%mesh%elements_near(dec%mesh%element_ijk(e), -1_ip, 1_ip, near, nnear)
+        do m = 1, nnear
+          t = dec%element_subdomain(near(m))
+          if (t /= s) call append_unmarked(adjncy, nadj, t, marker, s)
         end do
       end do
       call sort_ints(adjncy(first:nadj))
@@ -347,31 +339,25 @@ contains
     class(decomposition_t), intent(in) :: this
     integer(ip), intent(in) :: gid
     integer(ip), intent(out) :: ids(8), n
-    integer(ip) :: ijk(3), e(3), di, dj, dk, s, m, pos
-    ijk = this%mesh%node_ijk(gid)
+    integer(ip) :: near(27), nnear, k, s, m, pos
+    call this%mesh%elements_near(this%mesh%node_ijk(gid), -1_ip, 0_ip, near, nnear)
     n = 0
-    do dk = -1, 0
-      do dj = -1, 0
-        do di = -1, 0
-          e = ijk + [di, dj, dk]
-          if (any(e < 0) .or. any(e >= this%mesh%ng)) cycle
-          s = this%element_subdomain(this%mesh%element_gid(e))
-          ! insert s into the sorted ids(1:n) unless present
-          pos = n + 1
-          do m = 1, n
-            if (ids(m) >= s) then
-              pos = m
-              exit
-            end if
-          end do
-          if (pos <= n) then
-            if (ids(pos) == s) cycle
-          end if
-          ids(pos + 1:n + 1) = ids(pos:n)
-          ids(pos) = s
-          n = n + 1
-        end do
+    do k = 1, nnear
+      s = this%element_subdomain(near(k))
+      ! insert s into the sorted ids(1:n) unless present
+      pos = n + 1
+      do m = 1, n
+        if (ids(m) >= s) then
+          pos = m
+          exit
+        end if
       end do
+      if (pos <= n) then
+        if (ids(pos) == s) cycle
+      end if
+      ids(pos + 1:n + 1) = ids(pos:n)
+      ids(pos) = s
+      n = n + 1
     end do
   end subroutine node_subdomain_list
 
