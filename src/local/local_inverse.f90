@@ -3,7 +3,7 @@
 !> rank's subdomains (in the order of their offsets). Extended by
 !> kplus_block_t (one block-diagonal factorization, the default) and
 !> kplus_set_t (one factorization per subdomain); `&solver local_solver`
-!> chooses (see feti_operators%setup).
+!> chooses (see f_operator%init).
 module local_inverse
   use kinds, only: dp, i8
   use subdomain, only: subdomain_t
