@@ -6,6 +6,7 @@
 !> see blas_threads and docs/INPUT.md).
 program feticontact
   use, intrinsic :: iso_fortran_env, only: output_unit
+  use, intrinsic :: ieee_exceptions, only: ieee_usual, ieee_get_halting_mode, ieee_set_halting_mode, ieee_set_flag
   use kinds, only: path_len
   use errors, only: collective_error, exit_input_error, exit_process
   use logger, only: logger_init, log_section, log_message, log_is_root
@@ -19,8 +20,15 @@ program feticontact
   character(len=path_len) :: arg, file
   logical :: check_only
   integer :: i, ierr, nranks, status
+  logical :: halting(3)
 
+  ! The MPI library's start-up (PMIx under srun) may raise floating point
+  ! exceptions of its own: no trap (Debug builds trap) until it is done.
+  call ieee_get_halting_mode(ieee_usual, halting)
+  call ieee_set_halting_mode(ieee_usual, .false.)
   call MPI_Init(ierr)
+  call ieee_set_flag(ieee_usual, .false.)
+  call ieee_set_halting_mode(ieee_usual, halting)
   call logger_init(MPI_COMM_WORLD)
   call MPI_Comm_size(MPI_COMM_WORLD, nranks, ierr)
   ! before any BLAS work: one BLAS thread per rank unless the user says otherwise
