@@ -151,10 +151,10 @@ contains
     res = check_kkt(op, u, lambda)
     call timer_stop('kkt')
     kkt_ok = res%worst() <= p%reconstruction%kkt_tol
-    call log_section('KKT residuals (relative)')
-    write (line, '(5(a,es10.3))') 'equilibrium ', res%equilibrium, ', equality ', res%equality, &
-      ', feasibility ', res%feasibility, ', dual feasibility ', res%dual_feasibility, &
-      ', complementarity ', res%complementarity
+    call log_section('KKT residuals (relative: displacements to max |u|, forces per subdomain)')
+    write (line, '(6(a,es10.3))') 'equilibrium (worst subdomain) ', res%equilibrium, ', gluing jump ', &
+      res%gluing, ', Dirichlet ', res%dirichlet, ', penetration ', res%penetration, ', dual feasibility ', &
+      res%dual_feasibility, ', complementarity ', res%complementarity
     call log_message(line)
 
     ! 5. contact summary and output
@@ -255,6 +255,9 @@ contains
       call js%end_object()
       call js%begin_object('kkt')
       call js%add('equilibrium', res%equilibrium)
+      call js%add('gluing', res%gluing)
+      call js%add('dirichlet', res%dirichlet)
+      call js%add('penetration', res%penetration)
       call js%add('equality', res%equality)
       call js%add('feasibility', res%feasibility)
       call js%add('dual_feasibility', res%dual_feasibility)
