@@ -15,13 +15,22 @@
 !> the same units (multipliers); without it the SMALBE stopping test compares a
 !> displacement with a force. The minimizer nu is the same; the multiplier of
 !> the scaled problem is muhat/s, and `unscaled_multiplier` gives muhat back.
+!>
+!> Stopping test: the projected gradient is (up to the factor 1/s) minus the
+!> constraint violation B u - c of the displacements that the current
+!> multipliers reconstruct (projected on the free rows), row i being
+!> con%unit(i) times a displacement. With stop_weight = 1/con%unit, SMALBE's
+!> per-component test bounds the largest violation in displacement units (jump
+!> between copies, Dirichlet error, penetration) by tol times the
+!> displacements of the data (stop_scale; docs/THEORY.md "Stopping test").
 module dual_problem
   use kinds, only: dp, ip, MPI_REAL_DP
   use errors, only: fatal_error
   use qp_problem, only: qp_problem_t, no_lower_bound
-  use feti_operators, only: feti_t
+  use feti_operators, only: feti_t, local_field_t
+  use subdomain, only: subdomain_t
   use reconstruction, only: alpha_new
-  use mpi_f08, only: MPI_Allreduce, MPI_SUM
+  use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX
   implicit none
   private
 
@@ -36,6 +45,9 @@ module dual_problem
     real(dp), allocatable, private :: last_g(:), last_z(:), x_g(:), x_z(:)
     logical, private :: last_valid = .false., x_valid = .false.
     integer(ip) :: tracked_residuals = 0       !< eq_residual calls answered from the tracking
+    !> smallest force scale / E of eq_measure: the forces a displacement of the
+    !> data's size makes, max_s max|K_s| / E_s x (stop_scale s)
+    real(dp), private :: force_floor = 0
   contains
     procedure :: init
     procedure :: prepare
@@ -45,6 +57,7 @@ module dual_problem
     procedure :: eq_size
     procedure :: eq_residual
     procedure :: eq_apply_t
+    procedure :: eq_measure
     procedure :: track_last
     procedure :: track_step
     procedure :: track_reset
@@ -57,11 +70,19 @@ module dual_problem
 contains
 
   !> The problem of `op` (set up) with rho = rho_scale * ||P F P||.
-  subroutine init(self, op, rho_scale)
+  !> `stopping`: &solver stopping, 'violation' (default) or 'norm'.
+  subroutine init(self, op, rho_scale, stopping)
     class(dual_problem_t), intent(inout) :: self
     type(feti_t), intent(inout), target :: op
     real(dp), intent(in) :: rho_scale
-    integer(ip) :: n
+    character(len=*), intent(in), optional :: stopping
+    logical :: violation
+    integer(ip) :: n, ls
+    real(dp) :: mine
+    real(dp), allocatable :: unit(:), d(:)
+    logical, allocatable :: contact(:)
+    type(subdomain_t), pointer :: subs(:)
+    integer :: ierr
     call self%free()
     self%op => op
     n = op%n_own()
@@ -86,6 +107,35 @@ contains
     call self%apply_projector(self%fpx, self%b, .false.)
     self%b = self%b/self%scale
     self%lower = merge(op%lower_bounds(), no_lower_bound, op%is_contact())
+    ! &solver stopping = 'violation': the stopping test measures g^P per row
+    ! in displacement units (row i of B is unit(i) x a displacement; see
+    ! qp_problem and docs/THEORY.md "Stopping test")
+    ! and compares it with the displacements of the data: the largest
+    ! |d_i|/unit_i over the equality rows (prescribed displacements, and the
+    ! jumps of the subdomains deformed by their loads, B K^+ f), in the units
+    ! of the scaled QP (/s). Not max |W b|: P mixes the Dirichlet values of
+    ! the stiff subdomains, sqrt(E/young) times larger, into every row.
+    violation = .true.
+    if (present(stopping)) violation = stopping == 'violation'
+    if (violation) then
+      unit = op%row_units()
+      d = op%dual_rhs()
+      contact = op%is_contact()
+      allocate (self%stop_weight(n))
+      self%stop_weight = 1/unit(1:n)
+      mine = 0
+      if (n > 0) mine = maxval(abs(d(1:n))/unit(1:n), mask=.not. contact(1:n))
+      call MPI_Allreduce(mine, self%stop_scale, 1, MPI_REAL_DP, MPI_MAX, op%comm(), ierr)
+      mine = 0
+      subs => op%subdomains()
+      do ls = 1, op%nlocal()
+        mine = max(mine, maxval(abs(subs(ls)%K%values))/subs(ls)%young)
+      end do
+      call MPI_Allreduce(mine, self%force_floor, 1, MPI_REAL_DP, MPI_MAX, op%comm(), ierr)
+      self%force_floor = self%force_floor*self%stop_scale
+      self%stop_scale = self%stop_scale/self%scale
+      self%relative_eq_measure = .true.
+    end if
   end subroutine init
 
   !> y = (P F P x + rho Q x)/s, with Q x = x - P x.
@@ -206,6 +256,50 @@ contains
     call MPI_Allreduce(mine, total, 1, MPI_REAL_DP, MPI_SUM, self%comm, ierr)
     cnorm = sqrt(max(total, 0.0_dp))
   end subroutine eq_residual
+
+  !> C x = 0 of the per-component stopping test. G nu = R^T (B^T lambda - f)
+  !> per subdomain (lambda = nu + lambda~, G lambda~ = R^T f) is the force that
+  !> the subdomain's rigid modes do not balance. Its displacement effect is
+  !> inversely proportional to the subdomain's Young's modulus E_s, so it is
+  !> measured as max_s ||(G nu)_s|| / E_s relative to max_s F_s / E_s,
+  !> F_s = max(||B_s^T lambda||, ||f_s||): a relative force imbalance for one
+  !> material, in which a soft subdomain's imbalance counts as much as it moves
+  !> that subdomain, and a stiff one's as little. The denominator is at least
+  !> the forces a displacement of the data's size makes (max |K_s| S), so that
+  !> a solution without forces (a rigid motion) compares its round-off with
+  !> a force, not with round-off. One G and one B^T
+  !> application (G x is computed here: an extension may keep no G x).
+  real(dp) function eq_measure(self, x, cnorm)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(in) :: cnorm
+    type(local_field_t), allocatable :: btl(:)
+    real(dp), allocatable :: lambda(:), gx(:)
+    real(dp) :: mine(2), total(2)
+    integer(ip) :: ls
+    type(subdomain_t), pointer :: subs(:)
+    integer :: ierr
+    associate (op => self%op)
+      allocate (btl(op%nlocal()), lambda(self%n))
+      allocate (gx(op%n_coarse()))
+      call op%apply_g(x, gx)
+      lambda = x(1:self%n) + op%lambda_tilde_vector()
+      call op%apply_bt(lambda, btl)
+      mine = 0
+      subs => op%subdomains()
+      do ls = 1, op%nlocal()
+        associate (sub => subs(ls))
+          mine(1) = max(mine(1), norm2(gx(6*ls - 5:6*ls))/sub%young)
+          mine(2) = max(mine(2), max(norm2(btl(ls)%v), norm2(sub%f))/sub%young)
+        end associate
+      end do
+      call MPI_Allreduce(mine, total, 2, MPI_REAL_DP, MPI_MAX, self%comm, ierr)
+    end associate
+    total(2) = max(total(2), self%force_floor)
+    eq_measure = 0
+    if (total(2) > 0) eq_measure = total(1)/total(2)
+    if (total(2) <= 0 .and. total(1) > 0) eq_measure = huge(1.0_dp)
+  end function eq_measure
 
   !> y = G~^T mu = G^T muhat.
   subroutine eq_apply_t(self, muhat, y)

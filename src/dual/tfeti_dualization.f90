@@ -95,7 +95,7 @@ contains
     else
       this%dual => this%hat
     end if
-    call this%dual%init(this%op, p%solver%rho_scale)
+    call this%dual%init(this%op, p%solver%rho_scale, p%solver%stopping)
     call timer_stop('dual setup')
     write (line, '(a,es10.3,a,es10.3)') '||P F P|| ~ ', this%op%norm_pfp(), ', rho = ', this%dual%rho
     call log_message(line)
@@ -179,10 +179,10 @@ contains
     call timer_start('kkt')
     sol%kkt = check_kkt(this%op, sol%u, sol%lambda)
     call timer_stop('kkt')
-    call log_section('KKT residuals (relative)')
-    write (line, '(5(a,es10.3))') 'equilibrium ', sol%kkt%equilibrium, ', equality ', sol%kkt%equality, &
-      ', feasibility ', sol%kkt%feasibility, ', dual feasibility ', sol%kkt%dual_feasibility, &
-      ', complementarity ', sol%kkt%complementarity
+    call log_section('KKT residuals (relative: displacements to max |u|, forces per subdomain)')
+    write (line, '(6(a,es10.3))') 'equilibrium (worst subdomain) ', sol%kkt%equilibrium, ', gluing jump ', &
+      sol%kkt%gluing, ', Dirichlet ', sol%kkt%dirichlet, ', penetration ', sol%kkt%penetration, &
+      ', dual feasibility ', sol%kkt%dual_feasibility, ', complementarity ', sol%kkt%complementarity
     call log_message(line)
   end subroutine post_solve
 

@@ -8,12 +8,12 @@
 !> rank's subdomains (`concat`, subdomain s at offset(s)+1..offset(s+1)).
 !> Coarse vectors: the 6-blocks of the local subdomains.
 module b_operator
-  use kinds, only: dp, ip, i8
+  use kinds, only: dp, ip, i8, MPI_REAL_DP
   use params, only: params_t
   use decomposition, only: decomposition_t
   use subdomain, only: subdomain_t
-  use constraints, only: constraints_t, build_constraints, row_contact
-  use mpi_f08, only: MPI_Comm
+  use constraints, only: constraints_t, build_constraints, row_contact, row_gluing
+  use mpi_f08, only: MPI_Comm, MPI_Allreduce, MPI_MAX
   implicit none
   private
 
@@ -51,6 +51,9 @@ module b_operator
     procedure :: row_node_gid
     procedure :: row_coordinates
     procedure :: keyed_random
+    procedure :: largest_copy_spread
+    procedure :: row_kind
+    procedure :: row_units
     procedure :: free
   end type b_operator_t
 
@@ -292,6 +295,98 @@ contains
       x(:, i) = subs(this%con%row_sub(i))%coords(:, this%con%row_node(i))
     end do
   end function row_coordinates
+
+  !> max over nodes and components of sqrt(2 sum_c (u_c - mean)^2) over the
+  !> copies c of a glued node component. Every copy of such a component has
+  !> an entry in the node's last gluing row (Helmert row m-1 touches all m
+  !> copies; it is the copy's gluing row with the largest key), which carries
+  !> the sums: sum_c u_c and the number of copies, then the mean back to the
+  !> copies, then sum_c (u_c - mean)^2 (two-pass: no cancellation).
+  real(dp) function largest_copy_spread(this, u) result(spread)
+    class(b_operator_t), intent(inout) :: this
+    type(local_field_t), intent(in) :: u(:)
+    type(local_field_t), allocatable :: anchor(:)
+    real(dp), allocatable :: loc(:), own(:), cnt(:), mean_loc(:)
+    real(dp) :: mine
+    integer(ip) :: ls, e, row, dof
+    integer :: ierr
+    allocate (anchor(this%nlocal), loc(this%con%n_local), own(this%con%n_own), cnt(this%con%n_own), &
+              mean_loc(this%con%n_local))
+    ! the anchor row of every glued dof (stored as a real for local_field_t)
+    do ls = 1, this%nlocal
+      associate (bs => this%con%b(ls))
+        allocate (anchor(ls)%v(this%offset(ls + 1) - this%offset(ls)))
+        anchor(ls)%v = 0
+        do e = 1, bs%nentries
+          row = bs%row(e)
+          if (key_kind(this%con%key(row)) /= row_gluing) cycle
+          dof = bs%dof(e)
+          if (anchor(ls)%v(dof) == 0) then
+            anchor(ls)%v(dof) = row
+          else if (this%con%key(row) > this%con%key(int(anchor(ls)%v(dof), ip))) then
+            anchor(ls)%v(dof) = row
+          end if
+        end do
+      end associate
+    end do
+    ! number of copies and mean per anchor row
+    loc = 0
+    call accumulate(1)
+    call this%con%exchange%scatter_add(loc, cnt)
+    loc = 0
+    call accumulate(2)
+    call this%con%exchange%scatter_add(loc, own)
+    own = merge(own/max(cnt, 1.0_dp), 0.0_dp, cnt > 0)
+    call this%con%exchange%gather(own, mean_loc)
+    loc = 0
+    call accumulate(3)
+    call this%con%exchange%scatter_add(loc, own)
+    mine = 0
+    if (this%con%n_own > 0) mine = sqrt(2*maxval(own))
+    call MPI_Allreduce(mine, spread, 1, MPI_REAL_DP, MPI_MAX, this%con%comm, ierr)
+  contains
+    !> loc(anchor) += 1, u, or (u - mean)^2 over all glued dofs of all copies here.
+    subroutine accumulate(what)
+      integer, intent(in) :: what
+      integer(ip) :: ls2, d, a
+      do ls2 = 1, this%nlocal
+        do d = 1, size(anchor(ls2)%v)
+          a = int(anchor(ls2)%v(d), ip)
+          if (a == 0) cycle
+          select case (what)
+          case (1)
+            loc(a) = loc(a) + 1
+          case (2)
+            loc(a) = loc(a) + u(ls2)%v(d)
+          case default
+            loc(a) = loc(a) + (u(ls2)%v(d) - mean_loc(a))**2
+          end select
+        end do
+      end do
+    end subroutine accumulate
+  end function largest_copy_spread
+
+  !> The row kind (row_gluing, row_dirichlet, row_contact) encoded in a key
+  !> (constraints::row_key).
+  pure integer(ip) function key_kind(key)
+    integer(i8), intent(in) :: key
+    key_kind = int(mod(key/8, 4_i8), ip)
+  end function key_kind
+
+
+  !> The kind of each owned row: row_gluing, row_dirichlet or row_contact.
+  function row_kind(this) result(v)
+    class(b_operator_t), intent(in) :: this
+    integer(ip), allocatable :: v(:)
+    v = this%con%kind
+  end function row_kind
+
+  !> Row i of B is unit(i) times a displacement (owned rows; see constraints).
+  function row_units(this) result(v)
+    class(b_operator_t), intent(in) :: this
+    real(dp), allocatable :: v(:)
+    v = this%con%unit(1:this%con%n_own)
+  end function row_units
 
   !> A dual vector with entries in [-1, 1] that depend only on the rows'
   !> canonical keys, so that it is the same on any number of ranks.

@@ -71,6 +71,11 @@ module constraints
     integer(ip), allocatable :: kind(:)       !< (n_own) row_gluing | row_dirichlet | row_contact
     real(dp), allocatable :: c(:)             !< (n_own) right-hand side
     real(dp), allocatable :: scale(:)         !< (n_own) force = scale * multiplier (1 unless &solver scaling)
+    !> (n_own) a row's value is unit x a displacement: (B u - c)_i / unit_i is
+    !> the violation in displacement units (Dirichlet, contact: sqrt(w) as
+    !> scale; gluing: the weighted Helmert row k is unit x (the w-weighted mean
+    !> of copies 1..k minus copy k+1), unit = alpha_k S_k, sqrt(k/(k+1)) unweighted)
+    real(dp), allocatable :: unit(:)
     integer(ip), allocatable :: node(:)       !< (n_own) node gid
     integer(ip), allocatable :: row_sub(:)    !< (n_own) local subdomain index of the row's copy (s_1)
     integer(ip), allocatable :: row_node(:)   !< (n_own) local node number in that subdomain
@@ -83,7 +88,7 @@ module constraints
     integer(i8) :: key
     integer :: owner
     integer(ip) :: sub, dof, node, gid, kind, slot
-    real(dp) :: val, c, scale
+    real(dp) :: val, c, scale, unit
   end type record_t
 
 contains
@@ -175,7 +180,7 @@ contains
     con%n_local = con%n_own + n_ghost
 
     allocate (con%key(con%n_local), con%kind(con%n_own), con%c(con%n_own), con%node(con%n_own), &
-              con%row_sub(con%n_own), con%row_node(con%n_own), con%scale(con%n_own))
+              con%row_sub(con%n_own), con%row_node(con%n_own), con%scale(con%n_own), con%unit(con%n_own))
     do r = 1, nrows
       associate (first => rec(urow_first(r)))
         con%key(local_index(r)) = first%key
@@ -183,6 +188,7 @@ contains
           con%kind(local_index(r)) = first%kind
           con%c(local_index(r)) = first%c
           con%scale(local_index(r)) = first%scale
+          con%unit(local_index(r)) = first%unit
           con%node(local_index(r)) = first%gid
         end if
       end associate
@@ -261,15 +267,15 @@ contains
           do comp = 1, 3
             if (dirichlet(comp)) then
               call emit(row_key(gid, comp, row_dirichlet, j), int(me), ls, 3*(a - 1) + comp, a, gid, &
-                        row_dirichlet, j, sqrt(w(j)), sqrt(w(j))*value(comp), sqrt(w(j)))
+                        row_dirichlet, j, sqrt(w(j)), sqrt(w(j))*value(comp), sqrt(w(j)), sqrt(w(j)))
             else if (all(w(1:m) == 1)) then
               do k = max(1, j - 1), m - 1
                 if (j <= k) then
                   call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, j, 1/sqrt(real(k*(k + 1), dp)), 0.0_dp, 1.0_dp)
+                            gid, row_gluing, j, 1/sqrt(real(k*(k + 1), dp)), 0.0_dp, 1.0_dp, sqrt(k/real(k + 1, dp)))
                 else
                   call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, j, -k/sqrt(real(k*(k + 1), dp)), 0.0_dp, 1.0_dp)
+                            gid, row_gluing, j, -k/sqrt(real(k*(k + 1), dp)), 0.0_dp, 1.0_dp, sqrt(k/real(k + 1, dp)))
                 end if
               end do
             else
@@ -279,17 +285,17 @@ contains
                 alpha = 1/sqrt(sk*(1 + sk/w(k + 1)))
                 if (j <= k) then
                   call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, j, alpha*w(j), 0.0_dp, 1.0_dp)
+                            gid, row_gluing, j, alpha*w(j), 0.0_dp, 1.0_dp, alpha*sk)
                 else
                   call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, j, -alpha*sk, 0.0_dp, 1.0_dp)
+                            gid, row_gluing, j, -alpha*sk, 0.0_dp, 1.0_dp, alpha*sk)
                 end if
               end do
             end if
           end do
           if (contact .and. j == 1) then
             call emit(row_key(gid, 3_ip, row_contact, 1_ip), int(me), ls, 3*(a - 1) + 3, a, gid, &
-                      row_contact, j, -sqrt(w(1)), sqrt(w(1))*gap, sqrt(w(1)))
+                      row_contact, j, -sqrt(w(1)), sqrt(w(1))*gap, sqrt(w(1)), sqrt(w(1)))
           end if
         end do
       end do
@@ -310,13 +316,13 @@ contains
       end do
     end subroutine copy_weights
 
-    subroutine emit(key, owner, ls, dof, node, gid, kind, slot, val, c, scale)
+    subroutine emit(key, owner, ls, dof, node, gid, kind, slot, val, c, scale, unit)
       integer(i8), intent(in) :: key
       integer, intent(in) :: owner
       integer(ip), intent(in) :: ls, dof, node, gid, kind, slot
-      real(dp), intent(in) :: val, c, scale
+      real(dp), intent(in) :: val, c, scale, unit
       nrec = nrec + 1
-      if (filling) rec(nrec) = record_t(key, owner, ls, dof, node, gid, kind, slot, val, c, scale)
+      if (filling) rec(nrec) = record_t(key, owner, ls, dof, node, gid, kind, slot, val, c, scale, unit)
     end subroutine emit
   end subroutine build_constraints
 

@@ -91,6 +91,9 @@ module feti_operators
     procedure :: row_offset
     procedure :: row_node_gid
     procedure :: row_coordinates
+    procedure :: row_kind
+    procedure :: row_units
+    procedure :: largest_copy_spread
     procedure :: norm_pfp
     procedure :: f_applications
     procedure :: coarse_solves
@@ -376,6 +379,28 @@ contains
     real(dp), allocatable :: x(:, :)
     x = this%b%row_coordinates(this%subs)
   end function row_coordinates
+
+  !> The kind of each owned row: row_gluing, row_dirichlet or row_contact (constraints).
+  function row_kind(this) result(v)
+    class(feti_t), intent(in) :: this
+    integer(ip), allocatable :: v(:)
+    v = this%b%row_kind()
+  end function row_kind
+
+  !> Row i of B is unit(i) times a displacement (owned rows).
+  function row_units(this) result(v)
+    class(feti_t), intent(in) :: this
+    real(dp), allocatable :: v(:)
+    v = this%b%row_units()
+  end function row_units
+
+  !> The largest difference between the copies of a glued node component,
+  !> sqrt(2 sum_c (u_c - mean)^2), over all nodes of all ranks (see b_operator).
+  real(dp) function largest_copy_spread(this, u)
+    class(feti_t), intent(inout) :: this
+    type(local_field_t), intent(in) :: u(:)
+    largest_copy_spread = this%b%largest_copy_spread(u)
+  end function largest_copy_spread
 
   real(dp) function norm_pfp(this)
     class(feti_t), intent(in) :: this

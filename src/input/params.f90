@@ -71,6 +71,9 @@ module params
     character(len=name_len) :: coarse_placement = 'redundant'  !< 'redundant' | 'distributed'
     real(dp) :: regularization = 1            !< rho_f relative to the mean diagonal of K
     character(len=name_len) :: scaling = 'young'  !< rows of B weighted by Young's moduli: 'young' | 'none'
+    !> SMALBE's stopping test: 'violation' (largest constraint violation in
+    !> displacement units, relative) | 'norm' (the classical 2-norm test)
+    character(len=name_len) :: stopping = 'violation'
     logical :: monitor = .true.               !< one line per outer iteration
   end type solver_params_t
 
@@ -453,7 +456,7 @@ contains
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, &
                 regularization, active_tol, kkt_tol
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
-                               local_ordering, local_solver, coarse_placement, method, scaling
+                               local_ordering, local_solver, coarse_placement, method, scaling, stopping
     character(len=path_len) :: directory
     logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report
     namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping
@@ -463,7 +466,7 @@ contains
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
       m_scale, beta, eta_scale, power_iterations, coarse, coarse_placement, local_ordering, local_solver, &
-      regularization, scaling, monitor
+      regularization, scaling, stopping, monitor
     namelist /reconstruction/ method, active_tol, kkt_tol
     character(len=name_len) :: run_name
     namelist /output/ directory, run_name, write_hdf5, write_report
@@ -505,7 +508,7 @@ contains
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
         coarse_placement = s%coarse_placement
-        regularization = s%regularization; scaling = s%scaling; monitor = s%monitor
+        regularization = s%regularization; scaling = s%scaling; stopping = s%stopping; monitor = s%monitor
       end associate
       if (reading) read (group_text, nml=solver, iostat=status, iomsg=msg)
       if (.not. reading) write (written, nml=solver, delim='quote', iostat=status, iomsg=msg)
@@ -537,7 +540,7 @@ contains
       p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
                                  rho_scale, m_scale, beta, eta_scale, power_iterations, lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(coarse_placement), &
-                                 regularization, lower(scaling), monitor)
+                                 regularization, lower(scaling), lower(stopping), monitor)
     case ('reconstruction')
       p%reconstruction = reconstruction_params_t(lower(method), active_tol, kkt_tol)
     case ('output')
@@ -614,6 +617,8 @@ contains
         call fail('solver', 'regularization', 'must be > 0', reals([s%regularization]))
       if (.not. one_of(s%scaling, [character(len=8) :: 'none', 'young'])) &
         call fail('solver', 'scaling', "must be 'none' or 'young'", s%scaling)
+      if (.not. one_of(s%stopping, [character(len=9) :: 'violation', 'norm'])) &
+        call fail('solver', 'stopping', "must be 'violation' or 'norm'", s%stopping)
     end associate
     associate (r => p%reconstruction)
       if (.not. one_of(r%method, [character(len=8) :: 'new', 'standard', 'both'])) &

@@ -71,9 +71,10 @@ contains
     call js%add_each([character(len=16) :: 'f_applications', 'coarse_solves'], [op%f_applications(), op%coarse_solves()])
     call js%end_object()
     call js%begin_object('kkt')
-    call js%add_each([character(len=16) :: 'equilibrium', 'equality', 'feasibility', 'dual_feasibility', &
-                      'complementarity'], [sol%kkt%equilibrium, sol%kkt%equality, sol%kkt%feasibility, &
-                                           sol%kkt%dual_feasibility, sol%kkt%complementarity])
+    call js%add_each([character(len=16) :: 'equilibrium', 'gluing', 'dirichlet', 'penetration', 'equality', &
+                      'feasibility', 'dual_feasibility', 'complementarity'], &
+                     [sol%kkt%equilibrium, sol%kkt%gluing, sol%kkt%dirichlet, sol%kkt%penetration, sol%kkt%equality, &
+                      sol%kkt%feasibility, sol%kkt%dual_feasibility, sol%kkt%complementarity])
     call js%add('passed', sol%kkt%worst() <= p%reconstruction%kkt_tol)
     call js%end_object()
     call js%begin_object('reconstruction')

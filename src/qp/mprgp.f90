@@ -46,7 +46,8 @@
 !> The stopping rule is an object (`mprgp_stop_t`) asked every iteration with
 !> the current x and ||g^P||, so that SMALBE can stop the inner loop on
 !> ||g^P|| <= min(M ||C x||, eta). The stand-alone `solve` stops on
-!> ||g^P|| <= tol ||b|| (`mprgp_abs_stop_t`). The core, `minimize`, takes the
+!> ||g^P|| <= tol ||b|| (`mprgp_abs_stop_t`; always the 2-norm test: the
+!> per-component test of qp_problem is SMALBE's). The core, `minimize`, takes the
 !> linear term c as an argument (SMALBE passes b - C^T mu).
 !>
 !> Safeguards: every iterate is kept feasible (x <- max(x, l) after each
@@ -84,13 +85,14 @@ module mprgp
   end type mprgp_stop_t
 
   abstract interface
-    !> Set `stop` when the iterate x with projected gradient norm `gp_norm`
-    !> is accurate enough. Collective over problem%comm (may communicate).
-    subroutine stop_test_iface(self, problem, x, gp_norm, stop)
+    !> Set `stop` when the iterate x with gradient g and projected gradient
+    !> norm `gp_norm` is accurate enough. Collective over problem%comm (may
+    !> communicate).
+    subroutine stop_test_iface(self, problem, x, g, gp_norm, stop)
       import :: mprgp_stop_t, qp_problem_t, dp
       class(mprgp_stop_t), intent(inout) :: self
       class(qp_problem_t), intent(inout) :: problem
-      real(dp), intent(in) :: x(:)
+      real(dp), intent(in) :: x(:), g(:)
       real(dp), intent(in) :: gp_norm
       logical, intent(out) :: stop
     end subroutine stop_test_iface
@@ -133,10 +135,10 @@ module mprgp
 
 contains
 
-  subroutine abs_stop_test(self, problem, x, gp_norm, stop)
+  subroutine abs_stop_test(self, problem, x, g, gp_norm, stop)
     class(mprgp_abs_stop_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
-    real(dp), intent(in) :: x(:)
+    real(dp), intent(in) :: x(:), g(:)
     real(dp), intent(in) :: gp_norm
     logical, intent(out) :: stop
     stop = gp_norm <= self%tol_abs
@@ -310,7 +312,7 @@ contains
         self%best_gp_norm = gp
         self%n_best = self%n_iterations
       end if
-      call stop_rule%test(problem, x, gp, stop)
+      call stop_rule%test(problem, x, g, gp, stop)
       if (stop) then
         call set_status(self, qp_status_converged, 'converged (stopping rule met)', self%n_iterations)
         exit

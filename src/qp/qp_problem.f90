@@ -23,6 +23,20 @@
 !>
 !> Every type-bound procedure is collective over `comm` unless stated otherwise.
 !>
+!> Stopping test (what the solvers compare with tol): by default the classical
+!> ||g^P|| <= tol ||b|| and ||C x|| <= tol ||b|| in the 2-norm. A problem that
+!> allocates `stop_weight` (w_i > 0, local slice) asks instead for a test per
+!> component: max_i w_i |v^P_i| <= tol S, v = g - rho C^T C x the gradient
+!> without its penalty part, S = `stop_scale` if the problem sets it, else
+!> max_i w_i |b_i|; and C x = 0 measured by `eq_measure`: by default
+!> max(w) ||C x|| <= tol S, or, for a problem with `relative_eq_measure`, its
+!> own dimensionless measure <= tol (the FETI dual: the largest relative force
+!> imbalance of a subdomain). The FETI dual sets w = 1/(row scale), so that the
+!> test bounds the largest constraint violation of the reconstructed
+!> displacements (jump between copies, Dirichlet error, penetration) by tol
+!> times the largest one of the start, in displacement units, whatever the
+!> scaling of the rows and the material contrast (docs/THEORY.md).
+!>
 !> Global sums (dot products, norms, the solvers' fused reductions) are
 !> compensated: each rank sums its terms with Neumaier's algorithm
 !> (`compensated_add`) and the (sum, error) pairs are combined across ranks
@@ -37,7 +51,7 @@ module qp_problem
   use, intrinsic :: iso_c_binding, only: c_ptr, c_f_pointer
   use kinds, only: dp, ip, MPI_REAL_DP, MPI_INT_IP
   use errors, only: fatal_error
-  use mpi_f08, only: MPI_Comm, MPI_COMM_NULL, MPI_Allreduce, MPI_SUM, MPI_MIN, MPI_Datatype, MPI_Op, &
+  use mpi_f08, only: MPI_Comm, MPI_COMM_NULL, MPI_Allreduce, MPI_SUM, MPI_MIN, MPI_MAX, MPI_Datatype, MPI_Op, &
                      MPI_Type_contiguous, MPI_Type_commit, MPI_Op_create
   implicit none
   private
@@ -72,6 +86,13 @@ module qp_problem
     real(dp), allocatable :: b(:)              !< linear term (local slice)
     real(dp), allocatable :: lower(:)          !< lower bounds l (local slice), no_lower_bound if none
     logical :: has_equality = .false.          !< the constraint C x = 0 is present
+    !> weights of the per-component stopping test (see the module); not
+    !> allocated: the classical 2-norm test
+    real(dp), allocatable :: stop_weight(:)
+    !> the scale that per-component test compares with; 0: max_i w_i |b_i|
+    real(dp) :: stop_scale = 0
+    !> eq_measure is relative (compared with tol itself), not ||C x||
+    logical :: relative_eq_measure = .false.
   contains
     procedure(hessian_iface), deferred :: hessian
     procedure :: penalty => default_penalty
@@ -81,10 +102,14 @@ module qp_problem
     procedure :: track_last => default_track
     procedure :: track_step => default_track_step
     procedure :: track_reset => default_track
+    procedure :: eq_measure => default_eq_measure
     procedure :: init_base
     procedure :: free_base
     procedure :: dot
     procedure :: norm
+    procedure :: per_component_stop
+    procedure :: weighted_max
+    procedure :: projected_gradient_max
     procedure :: reduce_sums
     procedure :: global_min
     procedure :: count_at_bound
@@ -158,6 +183,8 @@ contains
     class(qp_problem_t), intent(inout) :: self
     if (allocated(self%b)) deallocate (self%b)
     if (allocated(self%lower)) deallocate (self%lower)
+    if (allocated(self%stop_weight)) deallocate (self%stop_weight)
+    self%stop_scale = 0
     self%n = 0
     self%has_equality = .false.
     self%comm = MPI_COMM_NULL
@@ -201,6 +228,16 @@ contains
     y = 0
   end subroutine default_eq_apply_t
 
+  !> The per-component stopping test's measure of C x = 0 at x, where
+  !> eq_residual(x) gave cnorm = ||C x|| (and was the last call of it):
+  !> ||C x|| by default.
+  real(dp) function default_eq_measure(self, x, cnorm)
+    class(qp_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(in) :: cnorm
+    default_eq_measure = cnorm
+  end function default_eq_measure
+
   !> Optional bookkeeping of C x that a problem may keep so that eq_residual
   !> needs no new work: the solver calls track_last when x has become the
   !> argument v of the last `hessian` call, track_step(alpha) when x moved to
@@ -235,6 +272,47 @@ contains
     real(dp), intent(in) :: x(:)
     norm = sqrt(self%dot(x, x))
   end function norm
+
+  !> True when the problem asks for the per-component stopping test.
+  logical function per_component_stop(self)
+    class(qp_problem_t), intent(in) :: self
+    per_component_stop = allocated(self%stop_weight)
+  end function per_component_stop
+
+  !> max_i w_i |v_i| over all ranks (w = 1 without stop_weight).
+  real(dp) function weighted_max(self, v)
+    class(qp_problem_t), intent(in) :: self
+    real(dp), intent(in) :: v(:)
+    real(dp) :: mine
+    integer :: ierr
+    mine = 0
+    if (self%n > 0) then
+      if (allocated(self%stop_weight)) then
+        mine = maxval(abs(self%stop_weight(1:self%n)*v(1:self%n)))
+      else
+        mine = maxval(abs(v(1:self%n)))
+      end if
+    end if
+    call MPI_Allreduce(mine, weighted_max, 1, MPI_REAL_DP, MPI_MAX, self%comm, ierr)
+  end function weighted_max
+
+  !> max_i w_i |g^P_i| over all ranks, g^P the projected gradient at x
+  !> (g^P_i = g_i where x_i > l_i, min(g_i, 0) where x_i is at its bound).
+  real(dp) function projected_gradient_max(self, x, g)
+    class(qp_problem_t), intent(in) :: self
+    real(dp), intent(in) :: x(:), g(:)
+    real(dp) :: mine, gp
+    integer(ip) :: i
+    integer :: ierr
+    mine = 0
+    do i = 1, self%n
+      gp = g(i)
+      if (x(i) <= self%lower(i) .and. self%lower(i) > no_lower_bound) gp = min(gp, 0.0_dp)
+      if (allocated(self%stop_weight)) gp = self%stop_weight(i)*gp
+      mine = max(mine, abs(gp))
+    end do
+    call MPI_Allreduce(mine, projected_gradient_max, 1, MPI_REAL_DP, MPI_MAX, self%comm, ierr)
+  end function projected_gradient_max
 
   !> One step of Neumaier's compensated summation: s + c <- s + c + p
   !> (s the running sum, c the accumulated rounding errors; start both at 0).

@@ -20,7 +20,11 @@
 !>    Hessian multiplication) until ||g^P(x, mu_k)|| <= min(M_k ||C x||, eta),
 !>    or until the outer criterion below holds;
 !> 2. stop if ||g^P(x_k, mu_k)|| <= tol ||b|| and ||C x_k|| <= tol ||b||;
-!>    the pair (x_k, muhat_k) is returned (mu is not updated after the test);
+!>    the pair (x_k, muhat_k) is returned (mu is not updated after the test).
+!>    With a problem that asks for the per-component test (qp_problem,
+!>    `stop_weight`): max_i w_i |g^P_i| <= tol S and max(w) ||C x_k|| <= tol S
+!>    with S = problem%stop_scale or max_i w_i |b_i| instead (the M test and
+!>    eta stay in the 2-norm);
 !> 3. muhat_{k+1} = muhat_k + rho z_k;
 !> 4. if k > 1 and L(x_k, mu_k) < L(x_{k-1}, mu_{k-1}) + rho/2 ||C x_k||^2,
 !>    M_{k+1} = beta M_k (beta in (0,1)), else M_{k+1} = M_k.
@@ -72,13 +76,23 @@ module smalbe
   !> The inner stopping rule of SMALBE-M; keeps z and ||C x|| of the last
   !> evaluation for the multiplier update.
   type, extends(mprgp_stop_t) :: smalbe_inner_stop_t
-    real(dp) :: m_bound = 0, eta = 0, tol_abs = 0
+    real(dp) :: m_bound = 0, eta = 0
+    real(dp) :: tol_gp = 0                 !< the outer test's bound of the measure of g^P
+    real(dp) :: tol_c = 0                  !< the outer test's bound of the equality measure
+    real(dp) :: rho = 0                    !< the penalty (per-component test: g without rho C^T C x)
+    real(dp) :: w_max = 1                  !< max_i w_i of the per-component test
+    logical :: per_component = .false.     !< the problem's per-component test (else ||g^P||, ||C x||)
+    real(dp) :: gp_measure = 0             !< the measure of g^P at the x of the last evaluation
+    real(dp) :: eq_measure = 0             !< the equality measure at that x
     real(dp) :: cnorm = 0                  !< ||C x|| of the last evaluation
     logical :: evaluated = .false.         !< cnorm and z belong to the x of the last test
     integer(ip) :: n_eq_residual = 0
     real(dp), allocatable :: z(:)
+    real(dp), allocatable :: work(:)       !< C^T C x, then g - rho C^T C x (per-component test)
   contains
     procedure :: test => inner_stop_test
+    procedure :: outer_measures
+    procedure :: outer_met
   end type smalbe_inner_stop_t
 
   !> The settings of SMALBE-M and its inner MPRGP, with the defaults of the
@@ -114,6 +128,11 @@ module smalbe
     real(dp) :: rho = 0                        !< problem%penalty()
     real(dp) :: norm_b = 0                     !< ||b||
     real(dp) :: tol_abs = 0                    !< tol ||b||
+    logical :: per_component = .false.         !< the problem's per-component stopping test is used
+    real(dp) :: gp_measure = 0                 !< the stopping test's measure of g^P at the returned x
+    real(dp) :: eq_measure = 0                 !< its measure of C x = 0 at the returned x
+    real(dp) :: tol_gp = 0                     !< the bound of gp_measure: tol ||b||, or tol S (see the module)
+    real(dp) :: tol_c = 0                      !< the bound of eq_measure: tol ||b||, or tol
     real(dp) :: eta = 0                        !< eta_scale ||b||
     real(dp) :: m_initial = 0                  !< M_0
     real(dp) :: m_bound = 0                    !< M of the last inner solve
@@ -140,17 +159,26 @@ module smalbe
 contains
 
   !> Stop the inner loop on ||g^P|| <= min(M ||C x||, eta), or on the outer
-  !> criterion ||g^P|| <= tol ||b|| and ||C x|| <= tol ||b||. A non-finite
-  !> ||C x|| also stops it (SMALBE then reports it).
-  subroutine inner_stop_test(self, problem, x, gp_norm, stop)
+  !> criterion (outer_met). A non-finite ||C x|| also stops it (SMALBE then
+  !> reports it). ||C x|| is evaluated only where one of the two can hold:
+  !> ||g^P|| <= eta, or (classical test) ||g^P|| <= tol_gp, or (per-component
+  !> test) max_i w_i |g^P_i| <= tol_gp + rho w_max ||C x|| for a ||C x|| small
+  !> enough that the M test would not stop the loop (||C x|| < ||g^P|| / M).
+  subroutine inner_stop_test(self, problem, x, g, gp_norm, stop)
     class(smalbe_inner_stop_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
-    real(dp), intent(in) :: x(:)
+    real(dp), intent(in) :: x(:), g(:)
     real(dp), intent(in) :: gp_norm
     logical, intent(out) :: stop
+    real(dp) :: gpw
     stop = .false.
     self%evaluated = .false.
-    if (gp_norm > max(self%eta, self%tol_abs)) return
+    if (self%per_component) then
+      gpw = problem%projected_gradient_max(x, g)
+      if (gp_norm > self%eta .and. gpw > self%tol_gp + self%rho*self%w_max*gp_norm/self%m_bound) return
+    else
+      if (gp_norm > max(self%eta, self%tol_gp)) return
+    end if
     call problem%eq_residual(x, self%z, self%cnorm)
     self%n_eq_residual = self%n_eq_residual + 1
     self%evaluated = .true.
@@ -158,9 +186,46 @@ contains
       stop = .true.
       return
     end if
-    stop = gp_norm <= min(self%m_bound*self%cnorm, self%eta) .or. &
-           (gp_norm <= self%tol_abs .and. self%cnorm <= self%tol_abs)
+    if (gp_norm <= min(self%m_bound*self%cnorm, self%eta)) then
+      stop = .true.
+      return
+    end if
+    call self%outer_measures(problem, x, g, gp_norm)
+    stop = self%outer_met()
   end subroutine inner_stop_test
+
+  !> gp_measure and eq_measure at x (g the gradient there; z and cnorm of
+  !> eq_residual at x already computed). Classical: ||g^P|| and ||C x||.
+  !> Per-component: max_i w_i |v^P_i| with v = g - rho C^T C x, the gradient
+  !> without its penalty part (for the FETI dual: the constraint violation of
+  !> the displacements the multipliers define), and problem%eq_measure.
+  subroutine outer_measures(self, problem, x, g, gp_norm)
+    class(smalbe_inner_stop_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(in) :: x(:), g(:)
+    real(dp), intent(in) :: gp_norm
+    integer(ip) :: n
+    if (.not. self%per_component) then
+      self%gp_measure = gp_norm
+      self%eq_measure = self%cnorm
+      return
+    end if
+    n = problem%n
+    if (allocated(self%work)) then
+      if (size(self%work) /= n) deallocate (self%work)
+    end if
+    if (.not. allocated(self%work)) allocate (self%work(n))
+    call problem%eq_apply_t(self%z, self%work)
+    self%work(1:n) = g(1:n) - self%rho*self%work(1:n)
+    self%gp_measure = problem%projected_gradient_max(x, self%work)
+    self%eq_measure = problem%eq_measure(x, self%cnorm)
+  end subroutine outer_measures
+
+  !> The outer criterion on the measures of the last evaluation.
+  logical function outer_met(self)
+    class(smalbe_inner_stop_t), intent(in) :: self
+    outer_met = self%gp_measure <= self%tol_gp .and. self%eq_measure <= self%tol_c
+  end function outer_met
 
   !> Set the parameters. a_norm: ||A|| > 0 (penalty included); tol in (0, 1);
   !> max_outer, max_hessian >= 1; gamma, alpha_scale, expansion as for MPRGP;
@@ -287,12 +352,33 @@ contains
     if (scale <= 0) scale = 1
     self%tol_abs = self%tol*scale
     self%eta = self%eta_scale*scale
+    self%per_component = problem%per_component_stop()
+    if (self%per_component) then
+      ! both parts of the violation bounded per component: g^P directly, and the
+      ! penalty part rho Q x of the gradient through max(w) ||C x|| >= ||W Q x||_inf
+      self%tol_gp = problem%stop_scale
+      if (self%tol_gp <= 0) self%tol_gp = problem%weighted_max(problem%b)
+      if (self%tol_gp <= 0) self%tol_gp = 1
+      self%tol_gp = self%tol*self%tol_gp
+      self%rule%w_max = problem%weighted_max(spread(1.0_dp, 1, problem%n))
+      if (problem%relative_eq_measure) then
+        self%tol_c = self%tol
+      else
+        self%tol_c = self%tol_gp/max(self%rule%w_max, tiny(1.0_dp))
+      end if
+    else
+      self%tol_gp = self%tol_abs
+      self%tol_c = self%tol_abs
+    end if
     self%m_initial = self%m_scale*self%a_norm
     m_now = self%m_initial
     self%muhat = 0
     self%ct_mu = 0
     self%b_lin(1:n) = problem%b(1:n)
-    self%rule%tol_abs = self%tol_abs
+    self%rule%tol_gp = self%tol_gp
+    self%rule%tol_c = self%tol_c
+    self%rule%per_component = self%per_component
+    self%rule%rho = self%rho
     self%rule%eta = self%eta
     self%rule%n_eq_residual = 0
     cnorm_prev = 0
@@ -329,6 +415,13 @@ contains
         self%rule%n_eq_residual = self%rule%n_eq_residual + 1
       end if
       self%cnorm = self%rule%cnorm
+      ! the outer criterion's measures at the final x: from the rule when its
+      ! last evaluation belongs to this x and got that far, else now
+      if (.not. (self%inner%status == qp_status_converged .and. self%rule%evaluated .and. &
+                 self%gp_norm > min(self%rule%m_bound*self%rule%cnorm, self%eta))) &
+        call self%rule%outer_measures(problem, x, self%gradient, self%gp_norm)
+      self%gp_measure = self%rule%gp_measure
+      self%eq_measure = self%rule%eq_measure
       ! L(x_k, mu_k) and the decrease L(x_k, mu_k) - L(x_{k-1}, mu_k) of the inner
       ! quadratic, the latter as 1/2 (x_k - x_{k-1})^T (g(x_k) + g(x_{k-1})): exact for a
       ! quadratic and free of the cancellation of a difference of two L values
@@ -351,9 +444,9 @@ contains
       if (self%monitor) call monitor_line(self, problem, x, outer)
 
       ! 2. outer stopping criterion, caps
-      if (self%gp_norm <= self%tol_abs .and. self%cnorm <= self%tol_abs) then
-        write (buf, '(a,es10.3,a,es10.3,a,es10.3,a,es10.3)') 'converged: ||g^P|| = ', self%gp_norm, ' <= ', &
-          self%tol_abs, ', ||C x|| = ', self%cnorm, ' <= ', self%tol_abs
+      if (self%rule%outer_met()) then
+        write (buf, '(3a,es10.3,a,es10.3,3a,es10.3,a,es10.3)') 'converged: ', gp_name(self), ' = ', &
+          self%gp_measure, ' <= ', self%tol_gp, ', ', eq_name(self), ' = ', self%eq_measure, ' <= ', self%tol_c
         self%status = qp_status_converged
         self%message = buf
         exit
@@ -400,15 +493,37 @@ contains
     if (self%monitor) call monitor_summary(self)
   end subroutine smalbe_solve
 
-  !> 'tol not met: ||g^P|| = .., ||C x|| = .. (both must be <= tol ||b|| = ..)'.
+  !> 'tol not met: ||g^P|| = .. (must be <= ..), ||C x|| = .. (must be <= ..)'.
   function distance_to_tol(self) result(text)
     class(smalbe_t), intent(in) :: self
     character(len=:), allocatable :: text
-    character(len=120) :: buf
-    write (buf, '(a,es9.2,a,es9.2,a,es9.2,a)') 'tol not met: ||g^P|| = ', self%gp_norm, ', ||C x|| = ', &
-      self%cnorm, ' (both must be <= tol ||b|| = ', self%tol_abs, ')'
+    character(len=200) :: buf
+    write (buf, '(3a,es9.2,a,es9.2,3a,es9.2,a,es9.2,a)') 'tol not met: ', gp_name(self), ' = ', self%gp_measure, &
+      ' (must be <= ', self%tol_gp, '), ', eq_name(self), ' = ', self%eq_measure, ' (must be <= ', self%tol_c, ')'
     text = trim(buf)
   end function distance_to_tol
+
+  !> The name of the stopping test's measure of g^P.
+  function gp_name(self) result(name)
+    class(smalbe_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    if (self%per_component) then
+      name = 'max w|(g - rho C^T C x)^P|'
+    else
+      name = '||g^P||'
+    end if
+  end function gp_name
+
+  !> The name of the stopping test's measure of C x = 0.
+  function eq_name(self) result(name)
+    class(smalbe_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    if (self%per_component .and. self%tol_c == self%tol) then
+      name = 'equality measure (relative)'
+    else
+      name = '||C x||'
+    end if
+  end function eq_name
 
   !> When the last inner solve ran long without improving its smallest ||g^P||
   !> in its second half, say so: more Hessian multiplications are unlikely to
@@ -449,10 +564,13 @@ contains
   subroutine monitor_header(self)
     class(smalbe_t), intent(in) :: self
     character(len=200) :: buf
-    write (buf, '(a,es10.3,a,es10.3,a,es10.3,a,es10.3,a,es10.3,2a)') 'SMALBE: rho = ', self%rho, &
-      ', ||A|| = ', self%a_norm, ', M0 = ', self%m_initial, ', eta = ', self%eta, ', tol ||b|| = ', &
-      self%tol_abs, ', expansion ', trim(self%inner%expansion)
+    write (buf, '(a,es10.3,a,es10.3,a,es10.3,a,es10.3,2a)') 'SMALBE: rho = ', self%rho, &
+      ', ||A|| = ', self%a_norm, ', M0 = ', self%m_initial, ', eta = ', self%eta, ', expansion ', &
+      trim(self%inner%expansion)
     call log_message(buf)
+    write (buf, '(3a,es10.3,3a,es10.3)') 'SMALBE: stop when ', gp_name(self), ' <= ', self%tol_gp, &
+      ' and ', eq_name(self), ' <= ', self%tol_c
+    call log_message(trim(buf))
     write (buf, '(a5,a7,a9,5a12,a9)') 'outer', 'inner', 'hessian', '||g^P||', '||Cx||', 'M', 'rho', &
       'L', 'active'
     call log_message(buf)
