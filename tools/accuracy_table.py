@@ -2,12 +2,12 @@
 """Speed against accuracy on uniform and heterogeneous material.
 
     tools/accuracy_table.py [--program build/bin/feticontact] [--ranks 2]
-        [--workdir output/accuracy] [--nsub 3] [--nel 4]
+        [--workdir output/accuracy] [--nsub 3] [--nel 4] [--delta 0.025]
         [--materials none:1,checkerboard:1e4,checkerboard:1e6,random:1e6]
         [--tols 1e-4,1e-6,1e-8] [--stopping violation,norm] [--ref-tol 1e-11]
 
-Runs the `cube` case (docs/CASES.md; nsub^3 subdomains of nel^3 elements,
-delta = 0.025) for every material, stopping test and tol, and once per
+Runs the `cube` case (docs/CASES.md; nsub^3 subdomains of nel^3 elements, or
+Nx,Ny,Nz of nx,ny,nz; top face moved down by delta) for every material, stopping test and tol, and once per
 material at ref-tol, and prints a Markdown table: Hessian multiplications,
 solve time, the displacement error max |u - u_ref| / max |u_ref| and the
 largest difference between the copies of a node (both computed from the HDF5
@@ -24,12 +24,18 @@ import h5py
 import numpy as np
 
 
-def write_case(path, out, nsub, nel, variation, contrast, tol, stopping, seed=1):
+def triple(v):
+    """'3' or 3 -> '3, 3, 3'; '2,1,1' -> '2, 1, 1'."""
+    parts = [p.strip() for p in str(v).split(",")]
+    return ", ".join(parts * 3 if len(parts) == 1 else parts)
+
+
+def write_case(path, out, nsub, nel, variation, contrast, tol, stopping, seed=1, delta=0.025):
     with open(path, "w") as f:
-        f.write("&mesh nsub = %d, %d, %d, nel = %d, %d, %d /\n" % (nsub, nsub, nsub, nel, nel, nel))
+        f.write("&mesh nsub = %s, nel = %s /\n" % (triple(nsub), triple(nel)))
         f.write("&material young = 2.1e5, poisson = 0.3, variation = '%s', contrast = %s, seed = %d /\n"
                 % (variation, contrast, seed))
-        f.write("&boundary top_dirichlet = .true., top_displacement = 0.0, 0.0, -0.025 /\n")
+        f.write("&boundary top_dirichlet = .true., top_displacement = 0.0, 0.0, -%s /\n" % delta)
         f.write("&obstacle shape = 'sphere', radius = 1.0, gap = 0.0 /\n")
         f.write("&solver tol = %s, stopping = '%s', max_hessian = 200000, max_outer = 2000, monitor = .false. /\n"
                 % (tol, stopping))
@@ -76,8 +82,9 @@ def main():
     ap.add_argument("--mpiexec", default="mpiexec")
     ap.add_argument("--ranks", type=int, default=2)
     ap.add_argument("--workdir", default="output/accuracy")
-    ap.add_argument("--nsub", type=int, default=3)
-    ap.add_argument("--nel", type=int, default=4)
+    ap.add_argument("--nsub", default="3", help="subdomains per direction: N or Nx,Ny,Nz")
+    ap.add_argument("--nel", default="4", help="elements per subdomain and direction: n or nx,ny,nz")
+    ap.add_argument("--delta", default="0.025", help="the downward displacement of the top face")
     ap.add_argument("--materials", default="none:1,checkerboard:1e4,checkerboard:1e6,random:1e6")
     ap.add_argument("--tols", default="1e-4,1e-6,1e-8")
     ap.add_argument("--stopping", default="violation,norm")
@@ -87,7 +94,7 @@ def main():
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
     for material in args.materials.split(","):
         variation, contrast = material.split(":")
-        common = dict(nsub=args.nsub, nel=args.nel, variation=variation, contrast=contrast)
+        common = dict(nsub=args.nsub, nel=args.nel, variation=variation, contrast=contrast, delta=args.delta)
         base = os.path.join(args.workdir, "%s_%s" % (variation, contrast))
         status, _, _, xr, ur = run_case(args.program, args.mpiexec, args.ranks, os.path.join(base, "ref"),
                                         tol=args.ref_tol, stopping="violation", **common)

@@ -6,7 +6,7 @@
 !> see blas_threads and docs/INPUT.md).
 program feticontact
   use, intrinsic :: iso_fortran_env, only: output_unit
-  use, intrinsic :: ieee_exceptions, only: ieee_usual, ieee_get_halting_mode, ieee_set_halting_mode, ieee_set_flag
+  use, intrinsic :: ieee_exceptions, only: ieee_get_halting_mode, ieee_set_halting_mode, ieee_set_flag, ieee_usual
   use kinds, only: path_len
   use errors, only: collective_error, exit_input_error, exit_process
   use logger, only: logger_init, log_section, log_message, log_is_root
@@ -20,10 +20,12 @@ program feticontact
   character(len=path_len) :: arg, file
   logical :: check_only
   integer :: i, ierr, nranks, status
-  logical :: halting(3)
+  logical :: halting(size(ieee_usual))
 
-  ! The MPI library's start-up (PMIx under srun) may raise floating point
-  ! exceptions of its own: no trap (Debug builds trap) until it is done.
+  ! MPI_Init runs the launcher's and the MPI library's own start-up code (PMIx
+  ! under srun, hwloc), which may divide by zero on purpose: floating point
+  ! traps (the Debug build's -ffpe-trap) are for this program's arithmetic,
+  ! so they are off during MPI_Init and restored after it
   call ieee_get_halting_mode(ieee_usual, halting)
   call ieee_set_halting_mode(ieee_usual, .false.)
   call MPI_Init(ierr)

@@ -21,11 +21,12 @@ module qp_test_problems
   use kinds, only: dp, ip, MPI_REAL_DP
   use errors, only: fatal_error
   use qp_problem, only: qp_problem_t, no_lower_bound
+  use assertions, only: assert_equal, assert_true
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Allgatherv
   implicit none
   private
 
-  public :: make_case
+  public :: make_case, same_count
 
   !> The global (replicated) data of one test QP and its exact solution.
   type, public :: qp_case_t
@@ -354,4 +355,20 @@ contains
       x(i) = (x(i) - dot_product(l(i + 1:, i), x(i + 1:)))/l(i, i)
     end do
   end function cholesky_solve
+
+  !> Step counts of the serial and the distributed run: equal when the
+  !> iterates are the same bits; otherwise a rounding difference may move one
+  !> decision (a step type, the stopping iteration), so they may differ by
+  !> 10% + 2 (more would mean another algorithm, not another rounding).
+  subroutine same_count(serial, distributed, identical, what, file, line)
+    integer(ip), intent(in) :: serial, distributed
+    logical, intent(in) :: identical
+    character(len=*), intent(in) :: what, file
+    integer, intent(in) :: line
+    if (identical) then
+      call assert_equal(serial, distributed, what//' (identical iterates)', file, line)
+    else
+      call assert_true(abs(serial - distributed) <= 2 + serial/10, what//' (iterates differ by rounding)', file, line)
+    end if
+  end subroutine same_count
 end module qp_test_problems

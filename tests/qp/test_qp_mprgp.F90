@@ -15,7 +15,7 @@ program test_qp_mprgp
                         qp_status_not_finite
   use mprgp, only: mprgp_t
   use tolerances, only: drift_tol
-  use qp_test_problems, only: qp_case_t, make_case, dense_qp_t
+  use qp_test_problems, only: qp_case_t, make_case, dense_qp_t, same_count
   use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_COMM_SELF, MPI_Comm_size
   implicit none
   integer :: ierr, nranks
@@ -86,22 +86,6 @@ contains
       norm2(x_full - cs%x_star)/norm2(cs%x_star)
     call log_message(buf)
   end subroutine check_case
-
-  !> Step counts of the serial and the distributed run: equal when the
-  !> iterates are the same bits; otherwise a rounding difference may move one
-  !> decision (a step type, the stopping iteration), so they may differ by
-  !> 10% + 2 (more would mean another algorithm, not another rounding).
-  subroutine same_count(serial, distributed, identical, what, file, line)
-    integer(ip), intent(in) :: serial, distributed
-    logical, intent(in) :: identical
-    character(len=*), intent(in) :: what, file
-    integer, intent(in) :: line
-    if (identical) then
-      call assert_equal(serial, distributed, what//' (identical iterates)', file, line)
-    else
-      call assert_true(abs(serial - distributed) <= 2 + serial/10, what//' (iterates differ by rounding)', file, line)
-    end if
-  end subroutine same_count
 
   !> ||x - x*|| <= 1e-8 ||x*||, x >= l, and the KKT conditions recomputed
   !> from the dense data: ||g^P(x)|| <= tol ||b|| (the stopping test, up to

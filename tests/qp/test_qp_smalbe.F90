@@ -15,7 +15,7 @@ program test_qp_smalbe
                         qp_status_incompatible, qp_status_not_finite
   use smalbe, only: smalbe_t, smalbe_settings_t
   use tolerances, only: drift_tol
-  use qp_test_problems, only: qp_case_t, make_case, dense_qp_t
+  use qp_test_problems, only: qp_case_t, make_case, dense_qp_t, same_count
   use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_COMM_SELF, MPI_Comm_size
   implicit none
   integer :: ierr, nranks
@@ -104,22 +104,6 @@ contains
       ', ||mu-mu*||/||mu*|| ', norm2(d_solver%muhat - cs%muhat_star)/norm2(cs%muhat_star)
     call log_message(buf)
   end subroutine check_case
-
-  !> Step counts of the serial and the distributed run: equal when the
-  !> iterates are the same bits; otherwise a rounding difference may move one
-  !> decision (a step type, the stopping iteration), so they may differ by
-  !> 10% + 2 (more would mean another algorithm, not another rounding).
-  subroutine same_count(serial, distributed, identical, what, file, line)
-    integer(ip), intent(in) :: serial, distributed
-    logical, intent(in) :: identical
-    character(len=*), intent(in) :: what, file
-    integer, intent(in) :: line
-    if (identical) then
-      call assert_equal(serial, distributed, what//' (identical iterates)', file, line)
-    else
-      call assert_true(abs(serial - distributed) <= 2 + serial/10, what//' (iterates differ by rounding)', file, line)
-    end if
-  end subroutine same_count
 
   !> The KKT conditions of the returned pair, recomputed from the dense data.
   subroutine check_solution(name, cs, x, gradient, solver, tol)
