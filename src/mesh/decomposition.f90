@@ -1,13 +1,19 @@
 !> Decomposition of the global box mesh into subdomains and the map of
-!> subdomains to MPI ranks. Everything here is replicated on every rank
-!> (arrays of the size of the number of global elements at most).
+!> subdomains to MPI ranks. Everything here is replicated on every rank.
 !>
 !> 'box': box subdomains (I,J,K) of nel elements, id 1 + I + Nx*(J + Ny*K).
+!> Nothing of the size of the global mesh is stored: the subdomain of an
+!> element, the elements of a subdomain, the subdomains holding a node and the
+!> subdomain graph follow from index arithmetic (arrays of the number of
+!> subdomains only: subdomain_rank).
 !> 'metis': the global mesh cut into product(nsub) parts by METIS_PartMeshDual
 !> (parts share faces: ncommon = 4) on rank 0. A part that is not
 !> face-connected is split into its face-connected components, each one a
 !> subdomain; empty parts are dropped. Ids are 1..N ordered by (METIS part,
 !> smallest element gid of the component).
+!> For now a METIS decomposition keeps element_subdomain(ne) and the element
+!> lists subdomain_element_ptr/subdomain_elements(ne) on every rank (8 bytes
+!> per global element per rank; issue 17, item 1, METIS part still open).
 !> Mapping 'block': contiguous blocks of ids, sizes differing by at most one;
 !> 'metis': METIS_PartGraphKway on the subdomain adjacency graph (subdomains
 !> sharing a node), vertex weights = element counts; a rank METIS leaves empty
@@ -32,13 +38,17 @@ module decomposition
     type(MPI_Comm) :: comm                              !< the ranks that share the subdomains
     character(len=name_len) :: method = 'box'           !< 'box' | 'metis'
     integer(ip) :: nsubdomains = 0, nranks = 1, rank = 0
-    integer(ip), allocatable :: element_subdomain(:)    !< element gid -> subdomain id
+    !> element gid -> subdomain id; 'metis' only (box: subdomain_of_element)
+    integer(ip), allocatable :: element_subdomain(:)
     integer(ip), allocatable :: subdomain_rank(:)       !< subdomain id -> owning rank (0-based)
     integer(ip), allocatable :: local_subdomains(:)     !< ids owned by this rank, ascending
-    !> elements of subdomain s: subdomain_elements(subdomain_element_ptr(s):subdomain_element_ptr(s+1)-1),
-    !> ascending gids
+    !> 'metis' only (box: subdomain_element_gids): elements of subdomain s:
+    !> subdomain_elements(subdomain_element_ptr(s):subdomain_element_ptr(s+1)-1), ascending gids
     integer(ip), allocatable :: subdomain_element_ptr(:), subdomain_elements(:)
   contains
+    procedure :: is_box
+    procedure :: subdomain_of_element
+    procedure :: subdomain_element_gids
     procedure :: node_subdomains
     procedure :: node_subdomain_list
     procedure :: subdomain_nelements
@@ -65,21 +75,21 @@ contains
     call box_mesh_init(dec%mesh, p%mesh%nsub, p%mesh%nel, p%mesh%lengths, p%mesh%distortion, &
                        p%mesh%distortion_seed)
     ne = dec%mesh%num_elements()
-    allocate (dec%element_subdomain(ne))
 
     select case (trim(p%mesh%decomposition))
     case ('box')
-      call box_partition(dec%mesh, dec%element_subdomain)
+      ! index arithmetic only: no array of the size of the mesh
       dec%nsubdomains = product(p%mesh%nsub)
     case ('metis')
+      allocate (dec%element_subdomain(ne))
       if (rank == 0) call metis_partition(dec%mesh, dec%element_subdomain, dec%nsubdomains)
       call MPI_Bcast(dec%nsubdomains, 1, MPI_INT_IP, 0, comm, ierr)
       call MPI_Bcast(dec%element_subdomain, ne, MPI_INT_IP, 0, comm, ierr)
+      call element_lists(dec)
     case default
       call collective_error("group &mesh, variable decomposition: must be 'box' or 'metis' (got "// &
                             trim(p%mesh%decomposition)//')', comm, exit_input_error)
     end select
-    call element_lists(dec)
 
     if (nranks > dec%nsubdomains) then
       write (msg, '(a,3(1x,i0),a,i0,a,i0,a,i0,a)') 'group &mesh, variable nsub: nsub =', p%mesh%nsub, &
@@ -102,16 +112,6 @@ contains
     end select
     dec%local_subdomains = pack([(s, s=1, dec%nsubdomains)], dec%subdomain_rank == rank)
   end subroutine build_decomposition
-
-  !> Box subdomains: element -> id 1 + I + Nx*(J + Ny*K).
-  subroutine box_partition(mesh, element_subdomain)
-    type(box_mesh_t), intent(in) :: mesh
-    integer(ip), intent(out) :: element_subdomain(:)
-    integer(ip) :: e
-    do e = 1, mesh%num_elements()
-      element_subdomain(e) = mesh%box_subdomain(e)
-    end do
-  end subroutine box_partition
 
   !> METIS parts of the whole mesh, split into face-connected subdomains (rank 0).
   subroutine metis_partition(mesh, element_subdomain, nsubdomains)
@@ -261,6 +261,10 @@ contains
     integer(ip) :: n, s, t, k, e, m, near(27), nnear, nadj, first
 
     n = dec%nsubdomains
+    if (dec%is_box()) then
+      call box_subdomain_graph(dec%mesh%nsub, xadj, adjncy)
+      return
+    end if
     allocate (xadj(n + 1), marker(n), adjncy(max(16, 8*n)))
     marker = 0
     nadj = 0
@@ -280,6 +284,45 @@ contains
     end do
     adjncy = adjncy(1:nadj)
   end subroutine subdomain_graph
+
+  !> The subdomain graph of box subdomains: box (I,J,K) shares a node with
+  !> every box (I+di,J+dj,K+dk), -1 <= di,dj,dk <= 1, inside the grid (nel >= 1).
+  !> The loop order dk, dj, di gives ascending ids.
+  subroutine box_subdomain_graph(nsub, xadj, adjncy)
+    integer(ip), intent(in) :: nsub(3)
+    integer(ip), allocatable, intent(out) :: xadj(:), adjncy(:)
+    integer(ip) :: n, s, nadj, b(3), t(3), di, dj, dk
+    n = product(nsub)
+    allocate (xadj(n + 1), adjncy(26*n))
+    nadj = 0
+    xadj(1) = 1
+    do s = 1, n
+      b = box_ijk(nsub, s)
+      do dk = -1, 1
+        do dj = -1, 1
+          do di = -1, 1
+            t = b + [di, dj, dk]
+            if (any(t < 0) .or. any(t >= nsub) .or. all([di, dj, dk] == 0)) cycle
+            nadj = nadj + 1
+            adjncy(nadj) = 1 + t(1) + nsub(1)*(t(2) + nsub(2)*t(3))
+          end do
+        end do
+      end do
+      xadj(s + 1) = nadj + 1
+    end do
+    adjncy = adjncy(1:nadj)
+  end subroutine box_subdomain_graph
+
+  !> Box subdomain id -> (I,J,K), 0-based.
+  pure function box_ijk(nsub, id) result(b)
+    integer(ip), intent(in) :: nsub(3), id
+    integer(ip) :: b(3), r
+    r = id - 1
+    b(1) = mod(r, nsub(1))
+    r = r/nsub(1)
+    b(2) = mod(r, nsub(2))
+    b(3) = r/nsub(2)
+  end function box_ijk
 
 
   !> METIS mapping of subdomains to ranks (rank 0).
@@ -303,7 +346,7 @@ contains
     call subdomain_graph(dec, xadj, adjncy)
     if (size(adjncy) == 0) adjncy = [0_ip]
     allocate (weights(n), part(n))
-    weights = dec%subdomain_element_ptr(2:n + 1) - dec%subdomain_element_ptr(1:n)
+    weights = [(dec%subdomain_nelements(s), s=1, n)]
     call metis_part_graph_kway(n, xadj, adjncy, nr, part, weights)
     rank_of = part - 1
     ! no rank may stay empty: it takes the largest id of the fullest rank
@@ -343,7 +386,7 @@ contains
     call this%mesh%elements_near(this%mesh%node_ijk(gid), -1_ip, 0_ip, near, nnear)
     n = 0
     do k = 1, nnear
-      s = this%element_subdomain(near(k))
+      s = this%subdomain_of_element(near(k))
       ! insert s into the sorted ids(1:n) unless present
       pos = n + 1
       do m = 1, n
@@ -365,6 +408,52 @@ contains
   pure integer(ip) function subdomain_nelements(this, id)
     class(decomposition_t), intent(in) :: this
     integer(ip), intent(in) :: id
-    subdomain_nelements = this%subdomain_element_ptr(id + 1) - this%subdomain_element_ptr(id)
+    if (this%is_box()) then
+      subdomain_nelements = product(this%mesh%nel)
+    else
+      subdomain_nelements = this%subdomain_element_ptr(id + 1) - this%subdomain_element_ptr(id)
+    end if
   end function subdomain_nelements
+
+  !> True for a box decomposition (index arithmetic, no global arrays).
+  pure logical function is_box(this)
+    class(decomposition_t), intent(in) :: this
+    is_box = trim(this%method) == 'box'
+  end function is_box
+
+  !> Id of the subdomain holding element `gid`.
+  pure integer(ip) function subdomain_of_element(this, gid)
+    class(decomposition_t), intent(in) :: this
+    integer(ip), intent(in) :: gid
+    if (this%is_box()) then
+      subdomain_of_element = this%mesh%box_subdomain(gid)
+    else
+      subdomain_of_element = this%element_subdomain(gid)
+    end if
+  end function subdomain_of_element
+
+  !> The element gids of subdomain `id`, ascending. Box: the elements (i,j,k)
+  !> with I*nel(1) <= i < (I+1)*nel(1) (and so on), k slowest then j then i.
+  pure function subdomain_element_gids(this, id) result(gids)
+    class(decomposition_t), intent(in) :: this
+    integer(ip), intent(in) :: id
+    integer(ip), allocatable :: gids(:)
+    integer(ip) :: b(3), lo(3), i, j, k, n
+    if (.not. this%is_box()) then
+      gids = this%subdomain_elements(this%subdomain_element_ptr(id):this%subdomain_element_ptr(id + 1) - 1)
+      return
+    end if
+    b = box_ijk(this%mesh%nsub, id)
+    lo = b*this%mesh%nel
+    allocate (gids(product(this%mesh%nel)))
+    n = 0
+    do k = lo(3), lo(3) + this%mesh%nel(3) - 1
+      do j = lo(2), lo(2) + this%mesh%nel(2) - 1
+        do i = lo(1), lo(1) + this%mesh%nel(1) - 1
+          n = n + 1
+          gids(n) = this%mesh%element_gid([i, j, k])
+        end do
+      end do
+    end do
+  end function subdomain_element_gids
 end module decomposition

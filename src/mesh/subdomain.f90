@@ -50,14 +50,13 @@ contains
     type(decomposition_t), intent(in) :: dec
     integer(ip), intent(in) :: id
     type(subdomain_t), intent(out) :: sub
-    integer(ip) :: first, e, a, n, nodes(8)
+    integer(ip) :: e, a, n, nodes(8)
     integer(ip), allocatable :: gids(:)
 
     if (id < 1 .or. id > dec%nsubdomains) call fatal_error('build_subdomain: no such subdomain id')
-    first = dec%subdomain_element_ptr(id)
     sub%id = id
-    sub%nelem = dec%subdomain_element_ptr(id + 1) - first
-    sub%elem_gid = dec%subdomain_elements(first:first + sub%nelem - 1)
+    sub%elem_gid = dec%subdomain_element_gids(id)
+    sub%nelem = size(sub%elem_gid, kind=ip)
     allocate (gids(8*sub%nelem), sub%elem_nodes(8, sub%nelem))
     do e = 1, sub%nelem
       gids(8*(e - 1) + 1:8*e) = dec%mesh%element_nodes(sub%elem_gid(e))

@@ -3,6 +3,10 @@
 !> subdomains, is identical on every rank, and the rank mapping covers every
 !> subdomain exactly once, for box and METIS decompositions and block and METIS
 !> mappings. node_subdomains and subdomain_graph against a brute-force count.
+!> Box decompositions hold no array of global size: their index-arithmetic
+!> answers (subdomain_of_element, subdomain_element_gids, subdomain_nelements,
+!> node_subdomain_list, subdomain_graph) equal those of element arrays built
+!> here the METIS way.
 program test_decomposition
   use kinds, only: dp, ip, MPI_INT_IP
   use params, only: params_t, default_params
@@ -41,7 +45,8 @@ contains
     character(len=80) :: what
     integer(ip) :: ne, nn, n, e, s, g, k, i, r
     integer(ip), allocatable :: root_copy(:), counts(:), mark(:), total(:), owned(:), ids(:), &
-                                xadj(:), adjncy(:), seen(:)
+                                xadj(:), adjncy(:), seen(:), esub(:), ptr(:), list(:)
+    integer(ip) :: list8(8), nlist
     logical, allocatable :: holds(:, :), adjacent(:, :)
     logical :: ok
     integer(ip) :: nodes(8), ijk(3)
@@ -58,47 +63,82 @@ contains
     ne = m%num_elements()
     nn = m%num_nodes()
     n = dec%nsubdomains
-    call assert_equal(ne, int(size(dec%element_subdomain), ip), trim(what)//': element_subdomain size', HERE)
     call assert_true(n >= 1, trim(what)//': at least one subdomain', HERE)
-    call assert_true(all(dec%element_subdomain >= 1 .and. dec%element_subdomain <= n), &
-                     trim(what)//': ids in 1..N', HERE)
+    ! the METIS-style arrays, built here: esub(e) = subdomain of element e, and
+    ! the element lists ptr/list by subdomain (ascending gids)
+    allocate (esub(ne))
     if (method == 'box') then
+      call assert_true(.not. allocated(dec%element_subdomain) .and. .not. allocated(dec%subdomain_elements) &
+                       .and. .not. allocated(dec%subdomain_element_ptr), &
+                       trim(what)//': no array of global size for box', HERE)
       call assert_equal(int(product(nsub), ip), n, trim(what)//': box subdomain count', HERE)
-      ok = .true.
       do e = 1, ne
         ijk = m%element_ijk(e)/int(nel, ip)
-        ok = ok .and. dec%element_subdomain(e) == 1 + ijk(1) + nsub(1)*(ijk(2) + nsub(2)*ijk(3))
+        esub(e) = 1 + ijk(1) + nsub(1)*(ijk(2) + nsub(2)*ijk(3))
       end do
-      call assert_true(ok, trim(what)//': box ids 1 + I + Nx*(J + Ny*K)', HERE)
+    else
+      call assert_equal(ne, int(size(dec%element_subdomain), ip), trim(what)//': element_subdomain size', HERE)
+      esub = dec%element_subdomain
+    end if
+    call assert_true(all(esub >= 1 .and. esub <= n), trim(what)//': ids in 1..N', HERE)
+    allocate (ptr(n + 1), list(ne))
+    ptr = 0
+    do e = 1, ne
+      ptr(esub(e) + 1) = ptr(esub(e) + 1) + 1
+    end do
+    ptr(1) = 1
+    do s = 1, n
+      ptr(s + 1) = ptr(s + 1) + ptr(s)
+    end do
+    k = 0
+    do s = 1, n
+      do e = 1, ne
+        if (esub(e) /= s) cycle
+        k = k + 1
+        list(k) = e
+      end do
+    end do
+    if (method == 'metis') then
+      call assert_true(all(dec%subdomain_element_ptr == ptr) .and. all(dec%subdomain_elements == list), &
+                       trim(what)//': stored element lists = rebuilt ones', HERE)
     end if
 
+    ! the procedures against the arrays
+    ok = .true.
+    do e = 1, ne
+      ok = ok .and. dec%subdomain_of_element(e) == esub(e)
+    end do
+    call assert_true(ok, trim(what)//': subdomain_of_element = element_subdomain array', HERE)
+    ok = .true.
+    do s = 1, n
+      ids = dec%subdomain_element_gids(s)
+      ok = ok .and. dec%subdomain_nelements(s) == ptr(s + 1) - ptr(s)
+      ok = ok .and. size(ids, kind=ip) == ptr(s + 1) - ptr(s)
+      if (ok) ok = all(ids == list(ptr(s):ptr(s + 1) - 1))
+    end do
+    call assert_true(ok, trim(what)//': subdomain_element_gids, subdomain_nelements = element lists', HERE)
+
     ! identical on every rank
-    root_copy = dec%element_subdomain
+    root_copy = [(dec%subdomain_of_element(e), e=1, ne)]
     call MPI_Bcast(root_copy, ne, MPI_INT_IP, 0, MPI_COMM_WORLD, ierr)
-    call assert_true(all(root_copy == dec%element_subdomain), trim(what)//': same elements on all ranks', HERE)
+    call assert_true(all(root_copy == esub), trim(what)//': same elements on all ranks', HERE)
     root_copy = dec%subdomain_rank
     call MPI_Bcast(root_copy, n, MPI_INT_IP, 0, MPI_COMM_WORLD, ierr)
     call assert_true(all(root_copy == dec%subdomain_rank), trim(what)//': same mapping on all ranks', HERE)
 
-    ! element lists: every element exactly once, in its own subdomain, ascending; none empty
+    ! element lists: every element exactly once; none empty
     allocate (counts(n), seen(ne))
     counts = 0
     seen = 0
-    ok = .true.
     do s = 1, n
-      do k = dec%subdomain_element_ptr(s), dec%subdomain_element_ptr(s + 1) - 1
-        e = dec%subdomain_elements(k)
-        seen(e) = seen(e) + 1
-        counts(s) = counts(s) + 1
-        ok = ok .and. dec%element_subdomain(e) == s
-        if (k > dec%subdomain_element_ptr(s)) ok = ok .and. dec%subdomain_elements(k - 1) < e
-      end do
+      ids = dec%subdomain_element_gids(s)
+      seen(ids) = seen(ids) + 1
+      counts(s) = size(ids, kind=ip)
     end do
     call assert_true(all(seen == 1), trim(what)//': every element listed exactly once', HERE)
-    call assert_true(ok, trim(what)//': element lists consistent and ascending', HERE)
     call assert_true(all(counts > 0), trim(what)//': no empty subdomain', HERE)
     call assert_equal(ne, sum(counts), trim(what)//': elements covered', HERE)
-    call assert_true(all(face_connected(m, dec%element_subdomain, n)), trim(what)//': face-connected', HERE)
+    call assert_true(all(face_connected(m, esub, n)), trim(what)//': face-connected', HERE)
 
     ! mapping: ranks in range, each rank owns >= 1, each subdomain owned exactly once
     call assert_equal(int(nranks, ip), dec%nranks, trim(what)//': nranks', HERE)
@@ -134,7 +174,7 @@ contains
     holds = .false.
     do e = 1, ne
       nodes = m%element_nodes(e)
-      holds(nodes, dec%element_subdomain(e)) = .true.
+      holds(nodes, esub(e)) = .true.
     end do
     ok = .true.
     do g = 1, nn
@@ -145,8 +185,11 @@ contains
       do i = 2, size(ids)
         ok = ok .and. ids(i - 1) < ids(i)
       end do
+      call dec%node_subdomain_list(g, list8, nlist)
+      ok = ok .and. nlist == size(ids, kind=ip)
+      if (ok) ok = all(list8(1:nlist) == ids)
     end do
-    call assert_true(ok, trim(what)//': node_subdomains = brute force, sorted', HERE)
+    call assert_true(ok, trim(what)//': node_subdomains, node_subdomain_list = brute force, sorted', HERE)
 
     ! subdomain graph: s, t neighbours iff they share a node
     allocate (adjacent(n, n))

@@ -74,7 +74,7 @@ contains
       centroid_err = max(centroid_err, maxval(abs(centroid/sub%nnodes - sub%centroid)))
       do e = 1, sub%nelem
         nodes = dec%mesh%element_nodes(sub%elem_gid(e))
-        ok_conn = ok_conn .and. dec%element_subdomain(sub%elem_gid(e)) == sub%id
+        ok_conn = ok_conn .and. dec%subdomain_of_element(sub%elem_gid(e)) == sub%id
         ok_conn = ok_conn .and. all(sub%node_gid(sub%elem_nodes(:, e)) == nodes)
       end do
       ! nodes of elements of other subdomains that this one does not hold
