@@ -28,6 +28,13 @@
 !> 3. muhat_{k+1} = muhat_k + rho z_k;
 !> 4. if k > 1 and L(x_k, mu_k) < L(x_{k-1}, mu_{k-1}) + rho/2 ||C x_k||^2,
 !>    M_{k+1} = beta M_k (beta in (0,1)), else M_{k+1} = M_k.
+!>    (`m_no_step`: what an inner solve without a step does to M, see step 4
+!>    in smalbe_solve.)
+!> 5. optional adaptive penalty (rho_growth > 1): rho <- rho_growth rho when
+!>    ||C x_k|| > rho_contraction ||C x_{k-1}||, at most smalbe_rho_cap rho_0;
+!>    the problem's Hessian follows through problem%set_penalty (see step 5 in
+!>    smalbe_solve). Off by default: measured in docs/RESULTS.md "Outer loop
+!>    (issue 14, item 1)".
 !>
 !> The test of step 4 compares the Lagrangians of consecutive pairs (x_k, mu_k)
 !> as PERMON's SMALXE does. Written with mu_{k+1} and mu_k instead,
