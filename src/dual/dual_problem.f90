@@ -54,6 +54,7 @@ module dual_problem
     procedure :: apply_projector
     procedure :: hessian
     procedure :: penalty
+    procedure :: set_penalty
     procedure :: eq_size
     procedure :: eq_residual
     procedure :: eq_apply_t
@@ -202,6 +203,15 @@ contains
     class(dual_problem_t), intent(in) :: self
     penalty = self%rho/self%scale
   end function penalty
+
+  !> Set the penalty of the scaled QP to rho (that of Eq. (8): rho s), e.g.
+  !> when SMALBE raises it; hessian_norm follows.
+  subroutine set_penalty(self, rho)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: rho
+    if (.not. rho > 0) call fatal_error('dual_problem: set_penalty needs rho > 0')
+    self%rho = rho*self%scale
+  end subroutine set_penalty
 
   !> ||A|| of the scaled QP, for the MPRGP step length: P F P and rho Q act on
   !> complementary subspaces, so ||A|| = max(||P F P||, rho)/s.

@@ -63,7 +63,9 @@ contains
     type(solver_params_t), intent(in) :: sp
     s = smalbe_settings_t(tol=sp%tol, max_outer=sp%max_outer, max_hessian=sp%max_hessian, gamma=sp%gamma, &
                           alpha_scale=sp%alpha_scale, expansion=sp%expansion, m_scale=sp%m_scale, &
-                          beta=sp%beta, eta_scale=sp%eta_scale, monitor=sp%monitor)
+                          beta=sp%beta, eta_scale=sp%eta_scale, m_no_step=sp%m_no_step, &
+                          rho_growth=sp%rho_growth, rho_contraction=sp%rho_contraction, &
+                          monitor=sp%monitor)
   end function smalbe_settings
 
   !> Build the FETI operators and the dual QP of the case `p` on `comm`.

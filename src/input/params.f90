@@ -64,6 +64,10 @@ module params
     real(dp) :: m_scale = 100                 !< initial M = m_scale ||A||
     real(dp) :: beta = 0.5_dp                 !< M <- beta M when the SMALBE test fails
     real(dp) :: eta_scale = 0.1_dp            !< inner precision eta = eta_scale ||b||
+    !> M after an inner solve that made no step: 'cut' | 'temporary' | 'keep'
+    character(len=name_len) :: m_no_step = 'cut'
+    real(dp) :: rho_growth = 1                !< adaptive rho: factor (1: rho constant)
+    real(dp) :: rho_contraction = 0.5_dp      !< raise rho when ||C x|| shrinks by less than this per outer
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| power method
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
@@ -453,10 +457,12 @@ contains
     logical :: reading
     integer(ip) :: nsub(3), nel(3), distortion_seed, seed, max_outer, max_hessian, power_iterations
     real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
-                radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, &
+                radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, rho_growth, &
+                rho_contraction, &
                 regularization, active_tol, kkt_tol
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
-                               local_ordering, local_solver, coarse_placement, method, scaling, stopping
+                               local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
+                               m_no_step
     character(len=path_len) :: directory
     logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report
     namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping
@@ -465,7 +471,8 @@ contains
     namelist /boundary/ top_dirichlet, top_displacement, symmetry_x0, symmetry_y0
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
-      m_scale, beta, eta_scale, power_iterations, coarse, coarse_placement, local_ordering, local_solver, &
+      m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, power_iterations, coarse, &
+      coarse_placement, local_ordering, local_solver, &
       regularization, scaling, stopping, monitor
     namelist /reconstruction/ method, active_tol, kkt_tol
     character(len=name_len) :: run_name
@@ -504,7 +511,8 @@ contains
       associate (s => p%solver)
         tol = s%tol; max_outer = s%max_outer; max_hessian = s%max_hessian; gamma = s%gamma
         alpha_scale = s%alpha_scale; expansion = s%expansion; rho_scale = s%rho_scale
-        m_scale = s%m_scale; beta = s%beta; eta_scale = s%eta_scale
+        m_scale = s%m_scale; beta = s%beta; eta_scale = s%eta_scale; m_no_step = s%m_no_step
+        rho_growth = s%rho_growth; rho_contraction = s%rho_contraction
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
         coarse_placement = s%coarse_placement
@@ -538,7 +546,9 @@ contains
       p%obstacle = obstacle_params_t(lower(shape), radius, gap)
     case ('solver')
       p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
-                                 rho_scale, m_scale, beta, eta_scale, power_iterations, lower(coarse), &
+                                 rho_scale, m_scale, beta, eta_scale, lower(m_no_step), rho_growth, &
+                                 rho_contraction, power_iterations, &
+                                 lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(coarse_placement), &
                                  regularization, lower(scaling), lower(stopping), monitor)
     case ('reconstruction')
@@ -603,6 +613,11 @@ contains
       if (s%m_scale <= 0) call fail('solver', 'm_scale', 'must be > 0', reals([s%m_scale]))
       if (s%beta <= 0 .or. s%beta >= 1) call fail('solver', 'beta', 'must be in (0, 1)', reals([s%beta]))
       if (s%eta_scale <= 0) call fail('solver', 'eta_scale', 'must be > 0', reals([s%eta_scale]))
+      if (.not. one_of(s%m_no_step, [character(len=9) :: 'cut', 'temporary', 'keep'])) &
+        call fail('solver', 'm_no_step', "must be 'cut', 'temporary' or 'keep'", s%m_no_step)
+      if (.not. s%rho_growth >= 1) call fail('solver', 'rho_growth', 'must be >= 1', reals([s%rho_growth]))
+      if (.not. (s%rho_contraction > 0 .and. s%rho_contraction < 1)) &
+        call fail('solver', 'rho_contraction', 'must be in (0, 1)', reals([s%rho_contraction]))
       if (s%power_iterations < 1) &
         call fail('solver', 'power_iterations', 'must be >= 1', ints([s%power_iterations]))
       if (.not. one_of(s%coarse, [character(len=8) :: 'mumps', 'cholesky'])) &

@@ -96,6 +96,7 @@ module qp_problem
   contains
     procedure(hessian_iface), deferred :: hessian
     procedure :: penalty => default_penalty
+    procedure :: set_penalty => default_set_penalty
     procedure :: eq_size => default_eq_size
     procedure :: eq_residual => default_eq_residual
     procedure :: eq_apply_t => default_eq_apply_t
@@ -197,6 +198,15 @@ contains
     default_penalty = 0
     if (self%has_equality) call fatal_error('qp_problem: has_equality but penalty() not provided')
   end function default_penalty
+
+  !> Change the penalty rho in the Hessian (A <- A + (rho - penalty()) C^T C);
+  !> needed only by a solver that raises rho (SMALBE with rho_growth > 1).
+  !> Not local-only: problems may communicate.
+  subroutine default_set_penalty(self, rho)
+    class(qp_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: rho
+    if (rho /= self%penalty()) call fatal_error('qp_problem: this problem cannot change its penalty (set_penalty)')
+  end subroutine default_set_penalty
 
   !> Length of the multiplier vector: 0 without equality constraint; a
   !> problem with one must override this.

@@ -28,6 +28,13 @@
 !> 3. muhat_{k+1} = muhat_k + rho z_k;
 !> 4. if k > 1 and L(x_k, mu_k) < L(x_{k-1}, mu_{k-1}) + rho/2 ||C x_k||^2,
 !>    M_{k+1} = beta M_k (beta in (0,1)), else M_{k+1} = M_k.
+!>    (`m_no_step`: what an inner solve without a step does to M, see step 4
+!>    in smalbe_solve.)
+!> 5. optional adaptive penalty (rho_growth > 1): rho <- rho_growth rho when
+!>    ||C x_k|| > rho_contraction ||C x_{k-1}||, at most smalbe_rho_cap rho_0;
+!>    the problem's Hessian follows through problem%set_penalty (see step 5 in
+!>    smalbe_solve). Off by default: measured in docs/RESULTS.md "Outer loop
+!>    (issue 14, item 1)".
 !>
 !> The test of step 4 compares the Lagrangians of consecutive pairs (x_k, mu_k)
 !> as PERMON's SMALXE does. Written with mu_{k+1} and mu_k instead,
@@ -107,8 +114,19 @@ module smalbe
     real(dp) :: m_scale = 100                  !< M_0 = m_scale ||A||
     real(dp) :: beta = 0.5_dp                  !< M <- beta M when the Lagrangian grows too little
     real(dp) :: eta_scale = 0.1_dp             !< eta = eta_scale ||b||
+    !> what an inner solve that made no step does to M: 'cut' (M <- beta M),
+    !> 'temporary' (only the next inner solve uses beta M, beta^2 M, ... while
+    !> the solves make no step) or 'keep' (SMALBE-M's theory: nothing)
+    character(len=name_len) :: m_no_step = 'cut'
+    !> adaptive penalty: rho <- rho_growth rho when ||C x_k|| > rho_contraction
+    !> ||C x_{k-1}|| after an inner solve that made a step (1: rho constant)
+    real(dp) :: rho_growth = 1
+    real(dp) :: rho_contraction = 0.5_dp
     logical :: monitor = .false.               !< one line per outer iteration and a summary
   end type smalbe_settings_t
+
+  !> rho never exceeds rho_cap times its initial value (adaptive penalty)
+  real(dp), parameter, public :: smalbe_rho_cap = 100
 
   !> The SMALBE-M solver with its inner MPRGP. All counters are totals of the
   !> last solve (components, for report.json).
@@ -119,6 +137,11 @@ module smalbe
     real(dp) :: m_scale = 100                  !< M_0 = m_scale ||A||
     real(dp) :: beta = 0.5_dp                  !< M <- beta M when the Lagrangian grows too little
     real(dp) :: eta_scale = 0.1_dp             !< eta = eta_scale ||b||
+    character(len=name_len) :: m_no_step = 'cut'  !< 'cut' | 'temporary' | 'keep' (see smalbe_settings_t)
+    real(dp) :: rho_growth = 1                 !< adaptive penalty factor (1: off; see smalbe_settings_t)
+    real(dp) :: rho_contraction = 0.5_dp       !< raise rho when ||C x|| shrinks by less than this
+    real(dp) :: rho_initial = 0                !< problem%penalty() at the start of the last solve
+    integer(ip) :: n_rho_updates = 0           !< times rho was raised
     integer(ip) :: max_outer = 200             !< cap of outer iterations
     integer(ip) :: max_hessian = 20000         !< cap of Hessian multiplications in total
     ! results of the last solve
@@ -144,6 +167,7 @@ module smalbe
     integer(ip) :: n_expansion_fallback = 0    !< 'optimal' expansions redone with alpha_bar
     integer(ip) :: n_eq_residual = 0           !< eq_residual calls (FETI: coarse solves for ||C x||)
     integer(ip) :: n_m_updates = 0             !< times M was reduced
+    integer(ip) :: n_no_step = 0               !< inner solves that made no step
     integer(ip) :: n_norm_updates = 0          !< times the inner MPRGP raised its ||A|| estimate
     integer(ip) :: n_active = 0                !< components at their bound at the returned x
     real(dp), allocatable, private :: b_lin(:), ct_mu(:), ct_new(:), x_prev(:), g_prev(:)
@@ -232,12 +256,12 @@ contains
   !> m_scale > 0 (default 100), beta in (0, 1) (default 0.5), eta_scale > 0
   !> (default 0.1); monitor: one line per outer iteration and a summary.
   subroutine smalbe_init(self, a_norm, tol, max_outer, max_hessian, gamma, alpha_scale, expansion, &
-                         m_scale, beta, eta_scale, monitor)
+                         m_scale, beta, eta_scale, monitor, m_no_step, rho_growth, rho_contraction)
     class(smalbe_t), intent(inout) :: self
     real(dp), intent(in) :: a_norm, tol
     integer(ip), intent(in) :: max_outer, max_hessian
-    real(dp), intent(in), optional :: gamma, alpha_scale, m_scale, beta, eta_scale
-    character(len=*), intent(in), optional :: expansion
+    real(dp), intent(in), optional :: gamma, alpha_scale, m_scale, beta, eta_scale, rho_growth, rho_contraction
+    character(len=*), intent(in), optional :: expansion, m_no_step
     logical, intent(in), optional :: monitor
 
     call self%free()
@@ -254,6 +278,12 @@ contains
     if (present(eta_scale)) self%eta_scale = eta_scale
     self%monitor = .false.
     if (present(monitor)) self%monitor = monitor
+    self%m_no_step = 'cut'
+    if (present(m_no_step)) self%m_no_step = m_no_step
+    self%rho_growth = 1
+    if (present(rho_growth)) self%rho_growth = rho_growth
+    self%rho_contraction = 0.5_dp
+    if (present(rho_contraction)) self%rho_contraction = rho_contraction
 
     if (.not. (tol > 0 .and. tol < 1)) call fatal_error('smalbe: tol must be in (0, 1)')
     if (max_outer < 1) call fatal_error('smalbe: max_outer must be >= 1')
@@ -261,6 +291,14 @@ contains
     if (.not. (self%m_scale > 0)) call fatal_error('smalbe: m_scale must be > 0')
     if (.not. (self%beta > 0 .and. self%beta < 1)) call fatal_error('smalbe: beta must be in (0, 1)')
     if (.not. (self%eta_scale > 0)) call fatal_error('smalbe: eta_scale must be > 0')
+    select case (self%m_no_step)
+    case ('cut', 'temporary', 'keep')
+    case default
+      call fatal_error("smalbe: m_no_step must be 'cut', 'temporary' or 'keep'")
+    end select
+    if (.not. (self%rho_growth >= 1)) call fatal_error('smalbe: rho_growth must be >= 1')
+    if (.not. (self%rho_contraction > 0 .and. self%rho_contraction < 1)) &
+      call fatal_error('smalbe: rho_contraction must be in (0, 1)')
   end subroutine smalbe_init
 
   !> The settings `s` at once, with ||A|| = a_norm (penalty included).
@@ -269,7 +307,7 @@ contains
     type(smalbe_settings_t), intent(in) :: s
     real(dp), intent(in) :: a_norm
     call self%init(a_norm, s%tol, s%max_outer, s%max_hessian, s%gamma, s%alpha_scale, s%expansion, &
-                   s%m_scale, s%beta, s%eta_scale, s%monitor)
+                   s%m_scale, s%beta, s%eta_scale, s%monitor, s%m_no_step, s%rho_growth, s%rho_contraction)
   end subroutine smalbe_init_with
 
   subroutine smalbe_free(self)
@@ -322,9 +360,9 @@ contains
     class(qp_problem_t), intent(inout) :: problem
     real(dp), intent(inout) :: x(:)
     character(len=qp_message_len) :: reason, buf
-    real(dp) :: scale, lagr, change, cnorm_prev, m_now, s(2), hi(2), lo(2)
-    integer(ip) :: n, m, outer, i
-    logical :: gradient_given
+    real(dp) :: scale, lagr, change, cnorm_prev, m_now, s(2), hi(2), lo(2), l_shift, rho_old
+    integer(ip) :: n, m, outer, i, n_idle
+    logical :: gradient_given, failed
 
     call reset_counters(self)
     if (.not. self%is_compatible(problem, reason)) then
@@ -346,6 +384,11 @@ contains
     call ensure_size(self%rule%z, m)
 
     self%rho = problem%penalty()
+    self%rho_initial = self%rho
+    if (self%rho > self%inner%a_norm) then
+      self%inner%a_norm = self%rho
+      self%inner%alpha_bar = self%inner%alpha_scale/self%inner%a_norm
+    end if
     call problem%project(x)
     self%norm_b = problem%norm(problem%b)
     scale = self%norm_b
@@ -382,6 +425,8 @@ contains
     self%rule%eta = self%eta
     self%rule%n_eq_residual = 0
     cnorm_prev = 0
+    l_shift = 0
+    n_idle = 0
     gradient_given = .false.
     if (self%monitor) call monitor_header(self)
 
@@ -390,8 +435,8 @@ contains
       ! 1. inner problem, warm started from x_{k-1} with the gradient for mu_k
       self%x_prev(1:n) = x(1:n)
       self%g_prev(1:n) = self%gradient(1:n)
-      self%m_bound = m_now
-      self%rule%m_bound = m_now
+      self%m_bound = m_now*self%beta**n_idle
+      self%rule%m_bound = self%m_bound
       call self%inner%minimize(problem, self%b_lin, x, self%gradient, self%rule, &
                                self%max_hessian - self%n_hessian, gradient_given)
       gradient_given = .true.
@@ -478,13 +523,53 @@ contains
       ! = change + rho ||C x_{k-1}||^2 must be >= rho/2 ||C x_k||^2, else M <- beta M
       ! An inner solve that made no step (its test was already met, because
       ! M ||C x|| exceeds ||g^P||) leaves x where it was: the Lagrangian test
-      ! then passes, yet the next outer iteration cannot progress except by the
+      ! then passes, yet the next outer iteration may progress only by the
       ! slow growth of ||g^P|| through the multiplier. This happens in FETI when
-      ! ||C x|| sits at its round-off floor: treat it like a failed test.
-      if ((outer > 1 .and. change + self%rho*cnorm_prev**2 < 0.5_dp*self%rho*self%cnorm**2) .or. &
-          self%inner%n_iterations == 0) then
+      ! ||C x|| sits at its round-off floor. m_no_step = 'cut' treats it like a
+      ! failed test (M <- beta M for good); 'temporary' lets only the next inner
+      ! solve use beta M (beta^j M after j such solves in a row), so that the
+      ! stall is broken while M itself follows the theory; 'keep' does nothing.
+      ! (l_shift = rho ||C x_{k-1}||^2, plus the change of L(x_{k-1}, mu_k) by a
+      ! raised rho, see 5.)
+      failed = outer > 1 .and. change + l_shift < 0.5_dp*self%rho*self%cnorm**2
+      if (self%inner%n_iterations == 0) then
+        self%n_no_step = self%n_no_step + 1
+        n_idle = n_idle + 1
+      else
+        n_idle = 0
+      end if
+      if (self%m_no_step == 'cut' .and. self%inner%n_iterations == 0) failed = .true.
+      if (self%m_no_step /= 'temporary') n_idle = 0
+      if (failed) then
         m_now = self%beta*m_now
         self%n_m_updates = self%n_m_updates + 1
+      end if
+
+      ! 5. adaptive penalty: when ||C x|| shrank by less than rho_contraction
+      ! after an inner solve that made a step, rho <- rho_growth rho (at most
+      ! smalbe_rho_cap rho_0). A gains (rho - rho_old) C^T C, so does the
+      ! gradient at x_k (no Hessian product: C^T C x = eq_apply_t(z)); the
+      ! inner ||A|| estimate becomes max(||A||, rho) (A_0 and C^T C act on
+      ! complementary subspaces), and alpha_bar follows. L(x_k, mu_{k+1}) grows
+      ! by (rho - rho_old)/2 ||C x_k||^2, which the next test of 4. includes.
+      l_shift = self%rho*self%cnorm**2
+      if (self%rho_growth > 1 .and. outer > 1 .and. self%inner%n_iterations > 0 .and. &
+          self%cnorm > self%rho_contraction*cnorm_prev .and. &
+          self%rho_growth*self%rho <= smalbe_rho_cap*self%rho_initial*(1 + 1.0e-12_dp)) then
+        rho_old = self%rho
+        self%rho = self%rho_growth*self%rho
+        call problem%set_penalty(self%rho)
+        call problem%eq_apply_t(self%rule%z, self%ct_new)
+        do i = 1, n
+          self%gradient(i) = self%gradient(i) + (self%rho - rho_old)*self%ct_new(i)
+        end do
+        l_shift = l_shift + 0.5_dp*(self%rho - rho_old)*self%cnorm**2
+        self%rule%rho = self%rho
+        if (self%rho > self%inner%a_norm) then
+          self%inner%a_norm = self%rho
+          self%inner%alpha_bar = self%inner%alpha_scale/self%inner%a_norm
+        end if
+        self%n_rho_updates = self%n_rho_updates + 1
       end if
       cnorm_prev = self%cnorm
     end do
@@ -557,6 +642,8 @@ contains
     self%n_expansion_fallback = 0
     self%n_eq_residual = 0
     self%n_m_updates = 0
+    self%n_no_step = 0
+    self%n_rho_updates = 0
     self%n_norm_updates = 0
     self%n_active = 0
   end subroutine reset_counters
@@ -597,9 +684,13 @@ contains
       ', inner iterations ', self%n_inner, ' (cg ', self%n_cg, ', expansion ', self%n_expansion, &
       ', proportioning ', self%n_proportioning, ', expansion fallbacks ', self%n_expansion_fallback, ')'
     call log_message(buf)
-    write (buf, '(a,i0,a,i0,a,i0,a,es10.3,a,i0)') '  Hessian multiplications ', self%n_hessian, &
+    write (buf, '(a,i0,a,i0,a,i0,a,es10.3,a,i0,a,i0,3a)') '  Hessian multiplications ', self%n_hessian, &
       ', ||Cx|| evaluations ', self%n_eq_residual, ', M updates ', self%n_m_updates, ', final M ', &
-      self%m_bound, ', active ', self%n_active
+      self%m_bound, ', active ', self%n_active, ', inner solves without a step ', self%n_no_step, &
+      ' (m_no_step = ', trim(self%m_no_step), ')'
+    call log_message(buf)
+    write (buf, '(a,es10.3,a,es10.3,a,i0,a)') '  rho ', self%rho_initial, ' -> ', self%rho, ' (raised ', &
+      self%n_rho_updates, ' times)'
     call log_message(buf)
     if (self%n_norm_updates > 0) then
       write (buf, '(a,es10.3,a,es10.3,a,i0,a)') '  ||A|| estimate raised from ', self%a_norm, ' to ', &

@@ -47,6 +47,7 @@ module qp_test_problems
     real(dp), allocatable :: c_cols(:, :)      !< (m, n) local columns of C
     real(dp), allocatable :: c_full(:, :)      !< (m, n_global) all of C
     real(dp), allocatable :: cct_chol(:, :)    !< lower Cholesky factor of C C^T
+    real(dp), allocatable :: q_rows(:, :)      !< (n, n_global) local rows of Q = C^T (C C^T)^{-1} C
     logical :: orthonormal = .false.
     real(dp) :: rho = 0
     integer, allocatable :: counts(:), displs(:)
@@ -58,6 +59,7 @@ module qp_test_problems
     procedure :: gather
     procedure :: hessian => dense_hessian
     procedure :: penalty => dense_penalty
+    procedure :: set_penalty => dense_set_penalty
     procedure :: eq_size => dense_eq_size
     procedure :: eq_residual => dense_eq_residual
     procedure :: eq_apply_t => dense_eq_apply_t
@@ -189,6 +191,12 @@ contains
       do j = 1, cs%m
         self%cct_chol(1:j - 1, j) = 0
       end do
+      ! the rows of the projector Q onto Im C^T owned here (the penalty's C^T C)
+      if (allocated(self%q_rows)) deallocate (self%q_rows)
+      allocate (self%q_rows(n, cs%n))
+      do j = 1, cs%n
+        self%q_rows(:, j) = matmul(transpose(self%c_cols), cholesky_solve(self%cct_chol, cs%c(:, j)))
+      end do
     end if
   end subroutine create
 
@@ -223,6 +231,14 @@ contains
     class(dense_qp_t), intent(in) :: self
     dense_penalty = self%rho
   end function dense_penalty
+
+  !> A <- A + (rho - penalty()) Q: the penalty raised (or lowered) to rho.
+  subroutine dense_set_penalty(self, rho)
+    class(dense_qp_t), intent(inout) :: self
+    real(dp), intent(in) :: rho
+    self%a_rows = self%a_rows + (rho - self%rho)*self%q_rows
+    self%rho = rho
+  end subroutine dense_set_penalty
 
   integer(ip) function dense_eq_size(self)
     class(dense_qp_t), intent(in) :: self

@@ -38,6 +38,7 @@ program test_qp_smalbe
   ! multiplier update contracts like K (K + rho I)^{-1}, K = C_F^{-T} A_FF C_F^{-1}, which
   ! is close to 1 for a random C: the augmented Lagrangian method is then very slow.)
   call check_per_component_stop()
+  call check_rho_growth()
   call check_caps()
   call check_not_finite()
   call check_default_settings()
@@ -235,6 +236,71 @@ contains
                      'NaN Hessian: x and muhat stay finite', HERE)
     call assert_true(index(solver%message, 'non-finite') > 0, 'NaN Hessian: SMALBE message', HERE)
   end subroutine check_not_finite
+
+  !> The adaptive penalty (rho_growth > 1) on a case whose outer loop
+  !> contracts slowly (all bounds active, see above): rho is raised, the
+  !> problem's Hessian follows (set_penalty), the solve still reaches x* and
+  !> the KKT conditions of the final A = P A0 P + rho Q, the final rho is
+  !> reported and stays below the cap; the serial and the distributed solve
+  !> raise it equally often. Without growth, rho stays put.
+  subroutine check_rho_growth()
+    type(qp_case_t) :: cs, cs_final
+    type(dense_qp_t) :: serial, dist
+    type(smalbe_t) :: s_solver, d_solver
+    type(smalbe_settings_t) :: settings
+    real(dp), allocatable :: xs(:), x_full(:), xd(:), g_full(:)
+    real(dp) :: rho0
+    real(dp), parameter :: tol = 1.0e-12_dp
+    call make_case(cs, 50_ip, 5_ip, 100.0_dp, 30_ip, 0_ip, 20_ip, .true., 15_ip)
+    rho0 = cs%rho
+    settings%tol = tol
+    settings%rho_growth = 2
+    settings%rho_contraction = 0.5_dp
+    call serial%create(MPI_COMM_SELF, cs, .true.)
+    call dist%create(MPI_COMM_WORLD, cs, .true.)
+    call s_solver%init_with(settings, cs%a_norm)
+    call d_solver%init_with(settings, cs%a_norm)
+    allocate (xs(serial%n), xd(dist%n), x_full(cs%n), g_full(cs%n))
+    xs = 0
+    xd = 0
+    call s_solver%solve(serial, xs)
+    call d_solver%solve(dist, xd)
+    call assert_equal(qp_status_converged, s_solver%status, 'rho growth: serial converged', HERE)
+    call assert_equal(qp_status_converged, d_solver%status, 'rho growth: distributed converged', HERE)
+    call assert_true(d_solver%n_rho_updates > 0, 'rho growth: rho raised at least once', HERE)
+    call assert_true(d_solver%rho > rho0 .and. d_solver%rho <= 100*rho0*(1 + 1.0e-12_dp), &
+                     'rho growth: final rho in (rho_0, 100 rho_0]', HERE)
+    call assert_true(abs(d_solver%rho - rho0*2.0_dp**d_solver%n_rho_updates) <= 1.0e-12_dp*d_solver%rho, &
+                     'rho growth: final rho = rho_0 2^(updates)', HERE)
+    call assert_true(dist%penalty() == d_solver%rho .and. serial%penalty() == s_solver%rho, &
+                     'rho growth: the problem carries the final rho', HERE)
+    call assert_equal(s_solver%n_rho_updates, d_solver%n_rho_updates, 'rho growth: serial = distributed updates', &
+                      HERE)
+    ! the KKT conditions of the final Hessian (C has orthonormal rows: Q = C^T C)
+    cs_final = cs
+    cs_final%a = cs%a + (d_solver%rho - rho0)*matmul(transpose(cs%c), cs%c)
+    cs_final%rho = d_solver%rho
+    cs_final%a_norm = max(cs%a_norm, d_solver%rho)
+    call check_solution('rho growth (serial)', cs_final, xs, s_solver%gradient, s_solver, tol)
+    call dist%gather(xd, x_full)
+    call dist%gather(d_solver%gradient, g_full)
+    call check_solution('rho growth (distributed)', cs_final, x_full, g_full, d_solver, tol)
+    call log_message('rho growth: rho raised ' // trim(itoa(d_solver%n_rho_updates)) // ' times')
+    ! default: constant rho
+    call dist%create(MPI_COMM_WORLD, cs, .true.)
+    settings%rho_growth = 1
+    call d_solver%init_with(settings, cs%a_norm)
+    xd = 0
+    call d_solver%solve(dist, xd)
+    call assert_true(d_solver%n_rho_updates == 0 .and. d_solver%rho == rho0 .and. dist%penalty() == rho0, &
+                     'rho growth 1: rho constant', HERE)
+  end subroutine check_rho_growth
+
+  function itoa(i) result(text)
+    integer(ip), intent(in) :: i
+    character(len=20) :: text
+    write (text, '(i0)') i
+  end function itoa
 
   !> init_with the default smalbe_settings_t: the literature defaults, and a solve.
   subroutine check_default_settings()
