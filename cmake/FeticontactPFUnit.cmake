@@ -33,8 +33,11 @@ function(feticontact_add_pfunit_test name)
                        ENVIRONMENT "${FETICONTACT_TEST_ENV}")
 endfunction()
 
+# The upstream release asset (with its submodules) is named pFUnit-v<version>.tar
+# since 4.2.3 (pFUnit-<version>.tar before); the archive's top folder is found by
+# its CMakeLists.txt, whatever its name.
 set(FETICONTACT_PFUNIT_URL
-    "https://github.com/Goddard-Fortran-Ecosystem/pFUnit/releases/download/v${FETICONTACT_PFUNIT_VERSION}/pFUnit-${FETICONTACT_PFUNIT_VERSION}.tar"
+    "https://github.com/Goddard-Fortran-Ecosystem/pFUnit/releases/download/v${FETICONTACT_PFUNIT_VERSION}/pFUnit-v${FETICONTACT_PFUNIT_VERSION}.tar"
     CACHE STRING "Upstream pFUnit release archive, downloaded when neither an installed pFUnit nor the local archive is found")
 
 # The cache folder: one per compiler (id, version, path) and MPI compiler wrapper,
