@@ -150,12 +150,31 @@ contains
         if (all(items(k)%values == defaults(j)%values)) cycle
       end if
       if (len(text) > 0) text = text//', '
-      text = text//trim(items(k)%name)//'='//trim(items(k)%values(1))
+      text = text//trim(items(k)%name)//'='//short(items(k)%values(1), items(k)%kind)
       do j = 2, items(k)%n
-        text = text//','//trim(items(k)%values(j))
+        text = text//','//short(items(k)%values(j), items(k)%kind)
       end do
     end do
     if (len(text) == 0) text = 'default'
+  contains
+    !> A real without the trailing zeros of its mantissa (2.0000 -> 2.0, 1.5000E-08 -> 1.5E-08).
+    function short(value, kind) result(v)
+      character(len=*), intent(in) :: value
+      character, intent(in) :: kind
+      character(len=:), allocatable :: v, mantissa
+      integer :: e
+      v = trim(adjustl(value))
+      if (kind /= 'r' .or. index(v, '.') == 0) return
+      e = scan(v, 'EeDd')
+      if (e == 0) e = len(v) + 1
+      mantissa = v(1:e - 1)
+      do while (len(mantissa) > 1)
+        if (mantissa(len(mantissa):len(mantissa)) /= '0' .or. &
+            mantissa(len(mantissa) - 1:len(mantissa) - 1) == '.') exit
+        mantissa = mantissa(1:len(mantissa) - 1)
+      end do
+      v = mantissa//v(e:)
+    end function short
   end function solver_variant
 
   !> The SMALBE monitor's per-outer figures: ||C x_k|| (`cnorm_per_outer`), the
@@ -172,7 +191,7 @@ contains
     integer(ip), allocatable :: h(:)
     integer(ip) :: k, j, nq, first
     real(dp) :: t
-    allocate (c(0), h(0), q(0))
+    allocate (c(0), h(0))
     if (allocated(solver%cnorm_history)) c = solver%cnorm_history
     if (allocated(solver%hessian_history)) h = solver%hessian_history
     nq = max(size(c, kind=ip) - 1, 0_ip)
