@@ -139,13 +139,16 @@ contains
     type(params_t), intent(in) :: p
     character(len=:), allocatable :: text
     type(param_item_t), allocatable :: items(:), defaults(:)
-    integer :: k, j
+    integer :: k, j, i
     call param_items(p, 'solver', items)
     call param_items(default_params(), 'solver', defaults)
     text = ''
     do k = 1, size(items)
       if (items(k)%name == 'monitor') cycle
-      j = findloc(defaults(:)%name, items(k)%name, 1)
+      j = 0
+      do i = 1, size(defaults)
+        if (defaults(i)%name == items(k)%name) j = i
+      end do
       if (j > 0) then
         if (all(items(k)%values == defaults(j)%values)) cycle
       end if
