@@ -52,7 +52,7 @@ contains
     call timer_stop('B and G')
 
     call timer_start('coarse setup')
-    call this%proj%init(this%dec, this%b, comm, p%solver%coarse_placement)
+    call this%proj%init(this%dec, this%b, comm, p%solver)
     call timer_stop('coarse setup')
 
     call timer_start('dual setup')
