@@ -9,6 +9,9 @@ submodule(feti_operators) feti_builder
   use decomposition, only: build_decomposition
   use subdomain, only: build_subdomain
   use assembly, only: assemble_subdomain
+  use coarse_problem, only: choose_coarse_ranks
+  use mpi_f08, only: MPI_Comm_size
+  use errors, only: collective_error, exit_input_error
   implicit none
 
 contains
@@ -23,6 +26,7 @@ contains
 
     call this%free()
     this%communicator = comm
+    call check_coarse_ranks()
 
     call timer_start('mesh')
     call build_decomposition(p, comm, this%dec)
@@ -79,6 +83,19 @@ contains
     end associate
     call estimate_norm_pfp(this, p%solver%power_iterations)
     call timer_stop('dual setup')
+
+  contains
+
+    !> &solver coarse_ranks against the number of ranks, before any set-up
+    !> work (the projector applies the same rule). Collective.
+    subroutine check_coarse_ranks()
+      integer :: nranks, c
+      character(len=300) :: msg
+      call MPI_Comm_size(comm, nranks, ierr)
+      call choose_coarse_ranks(p%solver%coarse_ranks, p%solver%coarse_placement, nranks, &
+                               int(product(int(p%mesh%nsub, i8)), ip), c, msg)
+      if (len_trim(msg) > 0) call collective_error(msg, comm, exit_input_error)
+    end subroutine check_coarse_ranks
   end subroutine setup
 
   !> ||P F P|| by the power method on Im P, from a keyed random start. It
