@@ -5,12 +5,12 @@
 !> (G G^T, projector) and 'dual setup' (d, e, lambda~, ||P F P||).
 submodule(feti_operators) feti_builder
   use timers, only: timer_start, timer_stop
-  use kinds, only: MPI_INT_I8
+  use kinds, only: MPI_INT_I8, MPI_REAL_DP
   use decomposition, only: build_decomposition
   use subdomain, only: build_subdomain
   use assembly, only: assemble_subdomain
   use coarse_problem, only: choose_coarse_ranks
-  use mpi_f08, only: MPI_Comm_size
+  use mpi_f08, only: MPI_Comm_size, MPI_IN_PLACE
   use errors, only: collective_error, exit_input_error
   implicit none
 
@@ -73,9 +73,16 @@ contains
       this%d = this%d - this%b%gap_rhs()
       ! lambda~ = G^T (G G^T)^{-1} e
       block
-        real(dp) :: z(6*this%n_local_subs)
+        real(dp) :: z(6*this%n_local_subs), sums(2)
+        character(len=120) :: line
         call this%proj%solve(this%e, z)
         call this%b%apply_gt(z, this%lambda_tilde)
+        ! the coarse solve's accuracy as the run sees it (inexact with &solver coarse_blr)
+        call this%b%apply_g(this%lambda_tilde, z)
+        sums = [sum((z - this%e)**2), sum(this%e**2)]
+        call MPI_Allreduce(MPI_IN_PLACE, sums, 2, MPI_REAL_DP, MPI_SUM, comm, ierr)
+        write (line, '(a,es10.3)') 'coarse check: ||G lambda~ - e|| / ||e|| = ', sqrt(sums(1)/max(sums(2), tiny(1.0_dp)))
+        call log_message(line)
       end block
       this%contact = this%b%is_contact()
       this%lower = -huge(1.0_dp)

@@ -6,14 +6,18 @@
 !> Box decompositions hold no array of global size: their index-arithmetic
 !> answers (subdomain_of_element, subdomain_element_gids, subdomain_nelements,
 !> node_subdomain_list, subdomain_graph) equal those of element arrays built
-!> here the METIS way.
+!> here the METIS way. METIS decompositions are distributed: each rank knows
+!> exactly the elements of its subdomains and those sharing a node with them
+!> (checked against the same partition made on one rank, MPI_COMM_SELF), the
+!> element lists of its own subdomains only, and answers node_subdomains for
+!> every node of its subdomains.
 program test_decomposition
   use kinds, only: dp, ip, MPI_INT_IP
   use params, only: params_t, default_params
   use box_mesh, only: box_mesh_t, box_mesh_init
   use decomposition, only: decomposition_t, build_decomposition, split_into_components, subdomain_graph
-  use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast, MPI_Allreduce, &
-                     MPI_SUM
+  use mpi_f08, only: MPI_Init, MPI_COMM_WORLD, MPI_COMM_SELF, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast, &
+                     MPI_Allreduce, MPI_SUM
   use assertions, only: assert_true, assert_equal, test_finish
   implicit none
   integer :: ierr, rank, nranks
@@ -40,14 +44,16 @@ contains
     integer, intent(in) :: nsub(3), nel(3)
     character(len=*), intent(in) :: method, mapping
     type(params_t) :: p
-    type(decomposition_t) :: dec
+    type(decomposition_t) :: dec, whole
     type(box_mesh_t) :: m
     character(len=80) :: what
     integer(ip) :: ne, nn, n, e, s, g, k, i, r
     integer(ip), allocatable :: root_copy(:), counts(:), mark(:), total(:), owned(:), ids(:), &
                                 xadj(:), adjncy(:), seen(:), esub(:), ptr(:), list(:)
     integer(ip) :: list8(8), nlist
-    logical, allocatable :: holds(:, :), adjacent(:, :)
+    logical, allocatable :: holds(:, :), adjacent(:, :), known(:), mine(:), near_mine(:)
+    integer(ip), allocatable :: seen_all(:)
+    integer(ip) :: near(27), nnear
     logical :: ok
     integer(ip) :: nodes(8), ijk(3)
 
@@ -68,7 +74,7 @@ contains
     ! the element lists ptr/list by subdomain (ascending gids)
     allocate (esub(ne))
     if (method == 'box') then
-      call assert_true(.not. allocated(dec%element_subdomain) .and. .not. allocated(dec%subdomain_elements) &
+      call assert_true(.not. allocated(dec%known_gids) .and. .not. allocated(dec%subdomain_elements) &
                        .and. .not. allocated(dec%subdomain_element_ptr), &
                        trim(what)//': no array of global size for box', HERE)
       call assert_equal(int(product(nsub), ip), n, trim(what)//': box subdomain count', HERE)
@@ -77,8 +83,11 @@ contains
         esub(e) = 1 + ijk(1) + nsub(1)*(ijk(2) + nsub(2)*ijk(3))
       end do
     else
-      call assert_equal(ne, int(size(dec%element_subdomain), ip), trim(what)//': element_subdomain size', HERE)
-      esub = dec%element_subdomain
+      ! the same partition made by one rank alone knows every element
+      call build_decomposition(p, MPI_COMM_SELF, whole)
+      call assert_equal(ne, int(size(whole%known_gids), ip), trim(what)//': one rank knows every element', HERE)
+      call assert_equal(n, whole%nsubdomains, trim(what)//': same subdomain count as on one rank', HERE)
+      esub = whole%known_subdomain
     end if
     call assert_true(all(esub >= 1 .and. esub <= n), trim(what)//': ids in 1..N', HERE)
     allocate (ptr(n + 1), list(ne))
@@ -98,46 +107,74 @@ contains
         list(k) = e
       end do
     end do
+    ! mine(e): e is in a subdomain of this rank; known(e): e is mine or shares a node with one of mine
+    allocate (mine(ne), known(ne), near_mine(ne))
+    mine = .false.
+    do s = 1, size(dec%local_subdomains)
+      mine(list(ptr(dec%local_subdomains(s)):ptr(dec%local_subdomains(s) + 1) - 1)) = .true.
+    end do
+    do e = 1, ne
+      call m%elements_near(m%element_ijk(e), -1_ip, 1_ip, near, nnear)
+      near_mine(e) = any(mine(near(1:nnear)))
+    end do
     if (method == 'metis') then
-      call assert_true(all(dec%subdomain_element_ptr == ptr) .and. all(dec%subdomain_elements == list), &
-                       trim(what)//': stored element lists = rebuilt ones', HERE)
+      known = .false.
+      known(dec%known_gids) = .true.
+      call assert_true(size(dec%known_gids) == count(known) .and. all(known .eqv. near_mine), &
+                       trim(what)//': known elements = mine and those sharing a node with them', HERE)
+      call assert_true(all(dec%known_gids(2:) > dec%known_gids(:size(dec%known_gids) - 1)), &
+                       trim(what)//': known gids ascending', HERE)
+      call assert_equal(int(size(dec%local_subdomains) + 1, ip), int(size(dec%subdomain_element_ptr), ip), &
+                        trim(what)//': element lists of the local subdomains only', HERE)
+    else
+      known = .true.
     end if
 
     ! the procedures against the arrays
     ok = .true.
     do e = 1, ne
-      ok = ok .and. dec%subdomain_of_element(e) == esub(e)
+      if (known(e)) then
+        ok = ok .and. dec%subdomain_of_element(e) == esub(e)
+      else
+        ok = ok .and. dec%subdomain_of_element(e) == 0
+      end if
     end do
-    call assert_true(ok, trim(what)//': subdomain_of_element = element_subdomain array', HERE)
+    call assert_true(ok, trim(what)//': subdomain_of_element = element_subdomain array (0 if unknown)', HERE)
     ok = .true.
     do s = 1, n
       ids = dec%subdomain_element_gids(s)
       ok = ok .and. dec%subdomain_nelements(s) == ptr(s + 1) - ptr(s)
+      if (method == 'metis' .and. dec%subdomain_rank(s) /= rank) then
+        ok = ok .and. size(ids) == 0
+        cycle
+      end if
       ok = ok .and. size(ids, kind=ip) == ptr(s + 1) - ptr(s)
       if (ok) ok = all(ids == list(ptr(s):ptr(s + 1) - 1))
     end do
     call assert_true(ok, trim(what)//': subdomain_element_gids, subdomain_nelements = element lists', HERE)
 
     ! identical on every rank
-    root_copy = [(dec%subdomain_of_element(e), e=1, ne)]
+    root_copy = esub
     call MPI_Bcast(root_copy, ne, MPI_INT_IP, 0, MPI_COMM_WORLD, ierr)
     call assert_true(all(root_copy == esub), trim(what)//': same elements on all ranks', HERE)
     root_copy = dec%subdomain_rank
     call MPI_Bcast(root_copy, n, MPI_INT_IP, 0, MPI_COMM_WORLD, ierr)
     call assert_true(all(root_copy == dec%subdomain_rank), trim(what)//': same mapping on all ranks', HERE)
 
-    ! element lists: every element exactly once; none empty
-    allocate (counts(n), seen(ne))
+    ! element lists: every element exactly once (over the ranks' own subdomains); none empty
+    allocate (counts(n), seen(ne), seen_all(ne))
     counts = 0
     seen = 0
     do s = 1, n
+      if (dec%subdomain_rank(s) /= rank) cycle
       ids = dec%subdomain_element_gids(s)
       seen(ids) = seen(ids) + 1
       counts(s) = size(ids, kind=ip)
     end do
-    call assert_true(all(seen == 1), trim(what)//': every element listed exactly once', HERE)
-    call assert_true(all(counts > 0), trim(what)//': no empty subdomain', HERE)
-    call assert_equal(ne, sum(counts), trim(what)//': elements covered', HERE)
+    call MPI_Allreduce(seen, seen_all, int(ne), MPI_INT_IP, MPI_SUM, MPI_COMM_WORLD, ierr)
+    call assert_true(all(seen_all == 1), trim(what)//': every element listed exactly once', HERE)
+    call assert_true(all(pack(counts, dec%subdomain_rank == rank) > 0), trim(what)//': no empty subdomain', HERE)
+    call assert_true(all(ptr(2:) > ptr(:n)), trim(what)//': no empty subdomain (all)', HERE)
     call assert_true(all(face_connected(m, esub, n)), trim(what)//': face-connected', HERE)
 
     ! mapping: ranks in range, each rank owns >= 1, each subdomain owned exactly once
@@ -178,6 +215,8 @@ contains
     end do
     ok = .true.
     do g = 1, nn
+      ! METIS: nodes of this rank's subdomains
+      if (method == 'metis' .and. .not. any(holds(g, dec%local_subdomains))) cycle
       ids = dec%node_subdomains(g)
       ok = ok .and. size(ids) == count(holds(g, :))
       if (.not. ok) exit
