@@ -64,11 +64,11 @@ contains
     call build_coarse_layout(dec, comm, this%layout)
     call this%coarse%init(dec, con, this%layout, comm, options=this%options)
     associate (mb => this%coarse%mumps_memory_mb())
-      write (msg, '(a,i0,a,i0,a,i0,a,es9.2,a,l1,a,i0,a,i0,a,i0,a)') 'coarse problem: dimension ', &
+      write (msg, '(a,i0,a,i0,a,i0,a,es9.2,a,l1,a,i0,a,i0,a,i0,a,i0,a)') 'coarse problem: dimension ', &
         6*dec%nsubdomains, ', ', this%coarse%groups(), ' group(s) of ', this%coarse%ranks_per_group(), &
         ' rank(s) (BLR ', s%coarse_blr, ', out-of-core ', s%coarse_ooc, '); factor entries ', &
-        this%coarse%factor_entries(), ', MUMPS factorization memory ', mb(1), ' MB max per rank, ', mb(2), &
-        ' MB per group'
+        this%coarse%factor_entries(), ' (after BLR ', this%coarse%factor_entries_effective(), &
+        '), MUMPS factorization memory ', mb(1), ' MB max per rank, ', mb(2), ' MB per group'
     end associate
     call log_message(msg)
     allocate (this%cwork(6*this%layout%nlocal), this%cwork2(6*this%layout%nlocal))
