@@ -51,6 +51,10 @@ contains
     allocate (this%xall(this%b%n_concat()))
     call timer_stop('B and G')
 
+    call timer_start('explicit F')
+    call choose_f_action(this, p)
+    call timer_stop('explicit F')
+
     call timer_start('coarse setup')
     call this%proj%init(this%dec, this%b, comm, p%solver%coarse_placement)
     call timer_stop('coarse setup')
@@ -80,6 +84,45 @@ contains
     call estimate_norm_pfp(this, p%solver%power_iterations)
     call timer_stop('dual setup')
   end subroutine setup
+
+  !> `&solver f_action`: build the explicit local operators for 'explicit',
+  !> or for 'auto' when the cost model says they win (the same choice on all
+  !> ranks, from global sums). The model, measured (docs/RESULTS.md, "Speed
+  !> (issue 16)"): an implicit F action runs at about `implicit_fraction` of
+  !> the explicit one's bytes per second (MUMPS's triangular solves on small
+  !> fronts against one streaming BLAS-2 kernel per subdomain), so the
+  !> explicit action is faster when its bytes are below implicit bytes / that
+  !> fraction; its set-up (n_d multi-right-hand-side solves per subdomain) is
+  !> paid back after `payback_actions` F actions at most.
+  subroutine choose_f_action(this, p)
+    class(feti_t), intent(inout) :: this
+    type(params_t), intent(in) :: p
+    real(dp), parameter :: speed_ratio = 2.5_dp
+    integer(i8) :: mine(2), all(2)
+    integer :: ierr
+    logical :: use_explicit
+    character(len=200) :: line
+    select case (p%solver%f_action)
+    case ('explicit')
+      use_explicit = .true.
+    case ('implicit')
+      use_explicit = .false.
+    case default
+      mine = [this%f%implicit_bytes(this%b), &
+              this%f%explicit_bytes(this%b, p%solver%f_storage, this%f%touched_dofs(this%b))]
+      call MPI_Allreduce(mine, all, 2, MPI_INT_I8, MPI_SUM, this%communicator, ierr)
+      use_explicit = real(all(2), dp) <= speed_ratio*real(all(1), dp)
+      write (line, '(a,es10.3,a,es10.3,a)') 'F action (auto): implicit ', real(all(1), dp), &
+        ' bytes, explicit ', real(all(2), dp), ' bytes per action on all ranks'
+      call log_message(line)
+    end select
+    if (use_explicit) call this%f%build_explicit(this%b, this%subs, p%solver%regularization, p%solver%f_storage)
+    if (use_explicit) then
+      call log_message('F action: explicit local operators ('//trim(p%solver%f_storage)//')')
+    else
+      call log_message('F action: implicit (K^+ solves)')
+    end if
+  end subroutine choose_f_action
 
   !> ||P F P|| by the power method on Im P, from a keyed random start. It
   !> stops when the estimate changes by less than 1e-3 relative or after

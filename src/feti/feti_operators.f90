@@ -96,6 +96,7 @@ module feti_operators
     procedure :: largest_copy_spread
     procedure :: norm_pfp
     procedure :: f_applications
+    procedure :: f_explicit
     procedure :: coarse_solves
     procedure :: free
   end type feti_t
@@ -411,6 +412,12 @@ contains
     class(feti_t), intent(in) :: this
     f_applications = this%f%n_applications()
   end function f_applications
+
+  !> True when F is applied with the explicit local operators.
+  logical function f_explicit(this)
+    class(feti_t), intent(in) :: this
+    f_explicit = this%f%is_explicit()
+  end function f_explicit
 
   integer(i8) function coarse_solves(this)
     class(feti_t), intent(in) :: this
