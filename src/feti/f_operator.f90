@@ -211,6 +211,7 @@ contains
           if (i /= j) sd(j, i) = sd(j, i) + a(k)
         end do
       else
+        call timer_start('explicit F: Schur')
         call m%init(MPI_COMM_SELF, spd=.true.)
         call m%set_centralized(subs(s)%ndof, irn, jcn, a)
         call m%set_ordering('amd')
@@ -218,12 +219,15 @@ contains
         call m%factorize()
         call m%schur_complement(sd)
         call m%free()
+        call timer_stop('explicit F: Schur')
       end if
       ! S^_s = its inverse (upper triangle)
+      call timer_start('explicit F: inverse')
       call dpotrf('U', n, sd, n, info)
       if (info == 0) call dpotri('U', n, sd, n, info)
       if (info /= 0) call fatal_error('f_operator%build_explicit: the Schur complement of K_reg is not '// &
                                       'positive definite (LAPACK dpotrf/dpotri failed)')
+      call timer_stop('explicit F: inverse')
       o = this%soff(s)
       do j = 1, n
         if (storage == 'packed') then

@@ -97,6 +97,7 @@ module feti_operators
     procedure :: norm_pfp
     procedure :: f_applications
     procedure :: f_explicit
+    procedure :: f_local_operator
     procedure :: coarse_solves
     procedure :: free
   end type feti_t
@@ -418,6 +419,16 @@ contains
     class(feti_t), intent(in) :: this
     f_explicit = this%f%is_explicit()
   end function f_explicit
+
+  !> The dense F^s of local subdomain `ls` on its local dual rows `rows`
+  !> (explicit F only; for tests).
+  subroutine f_local_operator(this, ls, rows, fs)
+    class(feti_t), intent(in) :: this
+    integer(ip), intent(in) :: ls
+    integer(ip), allocatable, intent(out) :: rows(:)
+    real(dp), allocatable, intent(out) :: fs(:, :)
+    call this%f%local_operator(ls, rows, fs)
+  end subroutine f_local_operator
 
   integer(i8) function coarse_solves(this)
     class(feti_t), intent(in) :: this
