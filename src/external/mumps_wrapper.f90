@@ -92,6 +92,7 @@ module mumps_wrapper
     generic :: solve => solve_matrix, solve_vector
     procedure :: factor_bytes
     procedure :: factor_entries
+    procedure :: factor_flops
     procedure :: order
     procedure :: is_factorized
     procedure :: free
@@ -393,6 +394,14 @@ contains
     factor_entries = 0
     if (this%factorized) factor_entries = count_of(this%id%INFOG(29))
   end function factor_entries
+
+  !> Floating-point operations of the last factorization (RINFOG(3),
+  !> summed over the ranks); 0 before a factorization.
+  real(dp) function factor_flops(this)
+    class(mumps_t), intent(in) :: this
+    factor_flops = 0
+    if (this%factorized) factor_flops = this%id%RINFOG(3)
+  end function factor_flops
 
   !> Order of the matrix.
   integer(ip) function order(this)

@@ -51,6 +51,7 @@ module f_operator
     integer(ip), allocatable :: erow(:), edof(:)  !< local dual row, compressed dof (1..nd)
     real(dp), allocatable :: eval(:)              !< values of B^_s
     integer(ip) :: n_local_rows = 0
+    real(dp) :: build_flop_count = 0              !< flops of build_explicit (MUMPS Schur + LAPACK)
     real(dp), allocatable :: wloc(:), wloc2(:), t(:), u(:)   !< work
   contains
     procedure :: init
@@ -64,6 +65,8 @@ module f_operator
     procedure :: bytes_per_action
     procedure :: n_applications
     procedure :: local_operator
+    procedure :: factor_flops
+    procedure :: build_flops
     procedure :: free
   end type f_operator_t
 
@@ -218,10 +221,12 @@ contains
         call m%set_schur(dofs)
         call m%factorize()
         call m%schur_complement(sd)
+        this%build_flop_count = this%build_flop_count + m%factor_flops()
         call m%free()
         call timer_stop('explicit F: Schur')
       end if
-      ! S^_s = its inverse (upper triangle)
+      ! S^_s = its inverse (upper triangle): n^3/3 + 2n^3/3 flops
+      this%build_flop_count = this%build_flop_count + real(n, dp)**3
       call timer_start('explicit F: inverse')
       call dpotrf('U', n, sd, n, info)
       if (info == 0) call dpotri('U', n, sd, n, info)
@@ -412,6 +417,19 @@ contains
     end do
   end subroutine local_operator
 
+  !> Floating-point operations of the factorization of K^+ (MUMPS's count).
+  real(dp) function factor_flops(this)
+    class(f_operator_t), intent(in) :: this
+    factor_flops = 0
+    if (allocated(this%kinv)) factor_flops = this%kinv%factor_flops()
+  end function factor_flops
+
+  !> Floating-point operations of build_explicit (0 if not built).
+  real(dp) function build_flops(this)
+    class(f_operator_t), intent(in) :: this
+    build_flops = this%build_flop_count
+  end function build_flops
+
   subroutine free(this)
     class(f_operator_t), intent(inout) :: this
     if (allocated(this%kinv)) then
@@ -424,6 +442,7 @@ contains
     if (allocated(this%smat)) deallocate (this%smat)
     if (allocated(this%wloc)) deallocate (this%wloc, this%wloc2, this%t, this%u)
     this%explicit = .false.
+    this%build_flop_count = 0
     this%applications = 0
     this%nsub = 0
   end subroutine free

@@ -98,6 +98,7 @@ module feti_operators
     procedure :: f_applications
     procedure :: f_explicit
     procedure :: f_local_operator
+    procedure :: setup_flops
     procedure :: coarse_solves
     procedure :: free
   end type feti_t
@@ -429,6 +430,14 @@ contains
     real(dp), allocatable, intent(out) :: fs(:, :)
     call this%f%local_operator(ls, rows, fs)
   end subroutine f_local_operator
+
+  !> Floating-point operations on this rank of the factorization of K^+ and
+  !> of the explicit local operators' build (0 if implicit).
+  function setup_flops(this) result(v)
+    class(feti_t), intent(in) :: this
+    real(dp) :: v(2)
+    v = [this%f%factor_flops(), this%f%build_flops()]
+  end function setup_flops
 
   integer(i8) function coarse_solves(this)
     class(feti_t), intent(in) :: this
