@@ -75,7 +75,7 @@ module params
     !> how F is applied: 'implicit' (K^+ solves) | 'explicit' (dense local
     !> operators, BLAS) | 'auto' (the cheaper one by the measured cost model)
     character(len=name_len) :: f_action = 'auto'
-    character(len=name_len) :: f_storage = 'symmetric'   !< explicit F: 'symmetric' | 'packed' | 'general'
+    character(len=name_len) :: f_storage = 'packed'      !< explicit F: 'packed' | 'symmetric' | 'general'
     character(len=name_len) :: coarse_placement = 'redundant'  !< 'redundant' | 'distributed'
     real(dp) :: regularization = 1            !< rho_f relative to the mean diagonal of K
     character(len=name_len) :: scaling = 'young'  !< rows of B weighted by Young's moduli: 'young' | 'none'
