@@ -76,7 +76,11 @@ module params
     !> operators, BLAS) | 'auto' (the cheaper one by the measured cost model)
     character(len=name_len) :: f_action = 'implicit'
     character(len=name_len) :: f_storage = 'packed'      !< explicit F: 'packed' | 'symmetric' | 'general'
-    character(len=name_len) :: coarse_placement = 'redundant'  !< 'redundant' | 'distributed'
+    !> 'auto' (coarse_ranks decides) | 'redundant' (= coarse_ranks 1) | 'distributed' (= all ranks)
+    character(len=name_len) :: coarse_placement = 'auto'
+    integer(ip) :: coarse_ranks = 0           !< ranks per coarse group (0: chosen from the coarse dimension)
+    real(dp) :: coarse_blr = 0                !< MUMPS BLR dropping tolerance for G G^T (0: full rank)
+    logical :: coarse_ooc = .false.           !< MUMPS out-of-core factors of G G^T
     real(dp) :: regularization = 1            !< rho_f relative to the mean diagonal of K
     character(len=name_len) :: scaling = 'young'  !< rows of B weighted by Young's moduli: 'young' | 'none'
     !> SMALBE's stopping test: 'violation' (largest constraint violation in
@@ -459,16 +463,16 @@ contains
     character(len=*), intent(in), optional :: group_text
     character(len=*), intent(out), optional :: written(:)
     logical :: reading
-    integer(ip) :: nsub(3), nel(3), distortion_seed, seed, max_outer, max_hessian, power_iterations
+    integer(ip) :: nsub(3), nel(3), distortion_seed, seed, max_outer, max_hessian, power_iterations, coarse_ranks
     real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, rho_growth, &
-                rho_contraction, &
+                rho_contraction, coarse_blr, &
                 regularization, active_tol, kkt_tol
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
                                m_no_step, f_action, f_storage
     character(len=path_len) :: directory
-    logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report
+    logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report, coarse_ooc
     namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping
     namelist /material/ young, poisson, variation, contrast, seed
     namelist /load/ top_pressure
@@ -476,7 +480,8 @@ contains
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
       m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, power_iterations, coarse, &
-      coarse_placement, local_ordering, local_solver, f_action, f_storage, &
+      coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
+      f_action, f_storage, &
       regularization, scaling, stopping, monitor
     namelist /reconstruction/ method, active_tol, kkt_tol
     character(len=name_len) :: run_name
@@ -520,7 +525,8 @@ contains
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
         f_action = s%f_action; f_storage = s%f_storage
-        coarse_placement = s%coarse_placement
+        coarse_placement = s%coarse_placement; coarse_ranks = s%coarse_ranks
+        coarse_blr = s%coarse_blr; coarse_ooc = s%coarse_ooc
         regularization = s%regularization; scaling = s%scaling; stopping = s%stopping; monitor = s%monitor
       end associate
       if (reading) read (group_text, nml=solver, iostat=status, iomsg=msg)
@@ -555,7 +561,7 @@ contains
                                  rho_contraction, power_iterations, &
                                  lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
-                                 lower(coarse_placement), &
+                                 lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, &
                                  regularization, lower(scaling), lower(stopping), monitor)
     case ('reconstruction')
       p%reconstruction = reconstruction_params_t(lower(method), active_tol, kkt_tol)
@@ -630,8 +636,16 @@ contains
         call fail('solver', 'coarse', "must be 'mumps' or 'cholesky'", s%coarse)
       if (.not. one_of(s%local_ordering, [character(len=8) :: 'amd', 'metis'])) &
         call fail('solver', 'local_ordering', "must be 'amd' or 'metis'", s%local_ordering)
-      if (.not. one_of(s%coarse_placement, [character(len=12) :: 'redundant', 'distributed'])) &
-        call fail('solver', 'coarse_placement', "must be 'redundant' or 'distributed'", s%coarse_placement)
+      if (.not. one_of(s%coarse_placement, [character(len=12) :: 'auto', 'redundant', 'distributed'])) &
+        call fail('solver', 'coarse_placement', "must be 'auto', 'redundant' or 'distributed'", s%coarse_placement)
+      if (s%coarse_ranks < 0) &
+        call fail('solver', 'coarse_ranks', 'must be >= 0 (0: chosen from the coarse dimension and the ranks)', &
+                  ints([s%coarse_ranks]))
+      if (s%coarse_ranks > 0 .and. s%coarse_placement /= 'auto') &
+        call fail('solver', 'coarse_ranks', "give coarse_ranks or coarse_placement ('redundant' = 1, "// &
+                  "'distributed' = all ranks), not both", ints([s%coarse_ranks])//', '//trim(s%coarse_placement))
+      if (.not. (s%coarse_blr >= 0 .and. s%coarse_blr < 1)) &
+        call fail('solver', 'coarse_blr', 'must be in [0, 1) (0: full-rank factors)', reals([s%coarse_blr]))
       if (.not. one_of(s%local_solver, [character(len=10) :: 'block', 'subdomain'])) &
         call fail('solver', 'local_solver', "must be 'block' or 'subdomain'", s%local_solver)
       if (.not. one_of(s%f_action, [character(len=10) :: 'implicit', 'explicit', 'auto'])) &
