@@ -76,12 +76,16 @@ module mumps_wrapper
     integer, pointer, contiguous :: irn(:) => null(), jcn(:) => null(), perm(:) => null()
     real(dp), pointer, contiguous :: a(:) => null()
     real(dp), pointer, contiguous :: rhs(:) => null()   !< solve buffer, grows, never shrinks
+    integer, pointer, contiguous :: schur_vars(:) => null()   !< Schur variables (set_schur)
+    real(dp), pointer, contiguous :: schur(:) => null()       !< the Schur complement, by columns
   contains
     procedure :: init
     procedure :: set_centralized
     procedure :: set_distributed
     procedure :: set_ordering
     procedure :: set_block_size
+    procedure :: set_schur
+    procedure :: schur_complement
     procedure :: set_low_rank
     procedure :: set_out_of_core
     procedure :: factorize
@@ -90,6 +94,7 @@ module mumps_wrapper
     generic :: solve => solve_matrix, solve_vector
     procedure :: factor_bytes
     procedure :: factor_entries
+    procedure :: factor_flops
     procedure :: factor_entries_effective
     procedure :: memory_mb
     procedure :: order
@@ -251,6 +256,49 @@ contains
     this%id%ICNTL(15) = merge(0, -k, k == 1)
   end subroutine set_block_size
 
+  !> Ask the next factorization for the Schur complement on the variables
+  !> `vars` (ICNTL(19) = 1, centralized; one rank only, MPI_COMM_SELF): the
+  !> other variables are eliminated, `vars` are not factorized, and
+  !> `schur_complement` returns S = A_vv - A_vi A_ii^{-1} A_iv. Needs fewer
+  !> variables than the order. Call after set_centralized.
+  subroutine set_schur(this, vars)
+    class(mumps_t), intent(inout) :: this
+    integer(ip), intent(in) :: vars(:)
+    integer :: m
+    call require_active(this, 'set_schur')
+    if (this%nranks /= 1) call fatal_error('mumps_wrapper: set_schur: one rank only')
+    m = size(vars)
+    if (m < 1 .or. m >= this%n) call fatal_error('mumps_wrapper: set_schur: needs 1 <= size(vars) < n')
+    if (associated(this%schur_vars)) deallocate (this%schur_vars)
+    if (associated(this%schur)) deallocate (this%schur)
+    allocate (this%schur_vars, source=vars)
+    allocate (this%schur(int(m, i8)*m))
+    this%id%ICNTL(19) = 1
+    this%id%SIZE_SCHUR = m
+    this%id%LISTVAR_SCHUR => this%schur_vars
+    this%id%SCHUR => this%schur
+  end subroutine set_schur
+
+  !> The Schur complement of the last factorization with set_schur, as a
+  !> full (m x m) matrix in the order of `vars`.
+  subroutine schur_complement(this, s)
+    class(mumps_t), intent(in) :: this
+    real(dp), intent(out) :: s(:, :)
+    integer :: m, j
+    if (.not. (this%factorized .and. associated(this%schur))) &
+      call fatal_error('mumps_wrapper: schur_complement without a factorization with set_schur')
+    m = size(this%schur_vars)
+    if (size(s, 1) /= m .or. size(s, 2) /= m) call fatal_error('mumps_wrapper: schur_complement: s must be m x m')
+    s = reshape(this%schur, [m, m])
+    ! symmetric: MUMPS returns the lower triangle by rows, i.e. the upper
+    ! triangle of this column-major array; the rest is workspace (measured:
+    ! not all zero), so the lower triangle is copied from the upper one
+    if (this%id%SYM /= 0) then
+      do j = 1, m - 1
+        s(j + 1:m, j) = s(j, j + 1:m)
+      end do
+    end if
+  end subroutine schur_complement
   !> Block low-rank (BLR) factorization for the next analysis and
   !> factorization: ICNTL(35) = 2 (BLR factorization, the factors kept in
   !> low-rank form, so they take less memory, and used so by the solve) with the
@@ -385,6 +433,13 @@ contains
     if (this%factorized) factor_entries = count_of(this%id%INFOG(29))
   end function factor_entries
 
+  !> Floating-point operations of the last factorization (RINFOG(3),
+  !> summed over the ranks); 0 before a factorization.
+  real(dp) function factor_flops(this)
+    class(mumps_t), intent(in) :: this
+    factor_flops = 0
+    if (this%factorized) factor_flops = this%id%RINFOG(3)
+  end function factor_flops
   !> Entries of the factors after BLR compression (INFOG(35)), summed over
   !> the ranks; equals factor_entries without BLR. 0 before a factorization.
   integer(i8) function factor_entries_effective(this)
@@ -428,6 +483,8 @@ contains
     call release_matrix(this)
     if (associated(this%perm)) deallocate (this%perm)
     if (associated(this%rhs)) deallocate (this%rhs)
+    if (associated(this%schur_vars)) deallocate (this%schur_vars)
+    if (associated(this%schur)) deallocate (this%schur)
     this%n = 0
     this%rank = -1
     this%nranks = 0
@@ -481,6 +538,7 @@ contains
   subroutine nullify_user_arrays(id)
     type(DMUMPS_STRUC), intent(inout) :: id
     nullify (id%IRN, id%JCN, id%A, id%IRN_loc, id%JCN_loc, id%A_loc, id%PERM_IN, id%RHS)
+    nullify (id%LISTVAR_SCHUR, id%SCHUR)
   end subroutine nullify_user_arrays
 
   !> A MUMPS count: negative values are millions.

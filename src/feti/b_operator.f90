@@ -41,6 +41,10 @@ module b_operator
     procedure :: apply_g
     procedure :: apply_gt
     procedure :: n_entries
+    procedure :: n_local_rows
+    procedure :: gather_rows
+    procedure :: scatter_rows
+    procedure :: subdomain_entries
     procedure :: constraints
     procedure :: row_counts
     procedure :: row_keys
@@ -227,6 +231,42 @@ contains
       n_entries = n_entries + this%con%b(ls)%nentries
     end do
   end function n_entries
+
+  !> Rows of the local dual vector: owned rows, then ghosts (dual_exchange).
+  integer(ip) function n_local_rows(this)
+    class(b_operator_t), intent(in) :: this
+    n_local_rows = this%con%n_local
+  end function n_local_rows
+
+  !> wloc = x on the owned rows and the owners' values on the ghosts.
+  subroutine gather_rows(this, x, wloc)
+    class(b_operator_t), intent(inout) :: this
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(inout) :: wloc(:)
+    call this%con%exchange%gather(x, wloc)
+  end subroutine gather_rows
+
+  !> y = the owned part of wloc plus the ghost values other ranks hold for it.
+  subroutine scatter_rows(this, wloc, y)
+    class(b_operator_t), intent(inout) :: this
+    real(dp), intent(in) :: wloc(:)
+    real(dp), intent(inout) :: y(:)
+    call this%con%exchange%scatter_add(wloc, y)
+  end subroutine scatter_rows
+
+  !> The entries of B^s of local subdomain `ls`: local row (1..n_local_rows),
+  !> subdomain dof, value.
+  subroutine subdomain_entries(this, ls, row, dof, val)
+    class(b_operator_t), intent(in) :: this
+    integer(ip), intent(in) :: ls
+    integer(ip), allocatable, intent(out) :: row(:), dof(:)
+    real(dp), allocatable, intent(out) :: val(:)
+    associate (bs => this%con%b(ls))
+      row = bs%row(1:bs%nentries)
+      dof = bs%dof(1:bs%nentries)
+      val = bs%val(1:bs%nentries)
+    end associate
+  end subroutine subdomain_entries
 
   !> The constraint data, for the coarse problems of the FETI layer (they
   !> assemble G G^T from it); `this` must be a target.

@@ -1,7 +1,23 @@
 !> F = B K^+ B^T, the dual operator of TFETI, with K^+ of the rank's
 !> subdomains behind local_inverse_t (`&solver local_solver`: 'block', one
 !> block-diagonal factorization, or 'subdomain', one per subdomain). B is
-!> passed in: F owns only K^+ and its work vector. Timer 'F action'.
+!> passed in: F owns only K^+, the explicit local operators and work vectors.
+!> Timer 'F action'.
+!>
+!> Two ways to apply F (`&solver f_action`, docs/THEORY.md "Explicit local
+!> dual operators"):
+!> - implicit: xall = B^T x, xall <- K^+ xall (MUMPS forward and backward
+!>   substitution), y = B xall;
+!> - explicit: every row of B^s has exactly one entry in subdomain s, so
+!>   F^s = B^s K^+ B^s^T = B^_s S^_s B^_s^T with S^_s = (K_reg^s)^{-1}
+!>   restricted to the n_d dofs that B^s touches (a dense symmetric n_d x n_d
+!>   matrix) and B^_s the n_b x n_d matrix with one entry per row. S^_s is
+!>   built once (`build_explicit`: the inverse of the Schur complement of
+!>   K_reg^s on those dofs, MUMPS + LAPACK) and applied with BLAS
+!>   (`storage`: 'symmetric' dsymv on the full square, upper triangle read;
+!>   'packed' dspmv on the packed upper triangle; 'general' dgemv on the full
+!>   square). n_d <= n_b (Helmert gluing rows touch a corner dof of a
+!>   subdomain up to 7 times), so S^_s is smaller than F^s itself.
 module f_operator
   use kinds, only: dp, ip, i8
   use errors, only: fatal_error
@@ -11,6 +27,10 @@ module f_operator
   use kplus_block, only: kplus_block_t
   use kplus_set, only: kplus_set_t
   use b_operator, only: b_operator_t
+  use sorting, only: sort_unique
+  use kplus, only: regularized_system
+  use mumps_wrapper, only: mumps_t
+  use mpi_f08, only: MPI_COMM_SELF
   implicit none
   private
 
@@ -19,14 +39,74 @@ module f_operator
     class(local_inverse_t), allocatable :: kinv   !< K^+ of all local subdomains
     real(dp), allocatable :: xall(:)              !< work: concatenated primal vector
     integer(i8) :: applications = 0
+    integer(ip) :: nsub = 0                       !< local subdomains
+    integer(ip), allocatable :: doff(:)           !< (nsub+1) dof offsets in the concatenated vector
+    ! ---- explicit local operators (built by build_explicit)
+    logical :: explicit = .false.
+    character(len=16) :: storage = 'symmetric'    !< 'symmetric' | 'packed' | 'general'
+    integer(ip), allocatable :: nd(:)             !< (nsub) dofs touched by B^s
+    integer(i8), allocatable :: soff(:)           !< (nsub+1) offsets of S^_s in smat
+    real(dp), allocatable :: smat(:)              !< all S^_s, one after the other
+    integer(ip), allocatable :: eoff(:)           !< (nsub+1) offsets of the entries of B^_s
+    integer(ip), allocatable :: erow(:), edof(:)  !< local dual row, compressed dof (1..nd)
+    real(dp), allocatable :: eval(:)              !< values of B^_s
+    integer(ip) :: n_local_rows = 0
+    real(dp) :: build_flop_count = 0              !< flops of build_explicit (MUMPS Schur + LAPACK)
+    real(dp), allocatable :: wloc(:), wloc2(:), t(:), u(:)   !< work
   contains
     procedure :: init
+    procedure :: build_explicit
+    procedure :: is_explicit
+    procedure :: explicit_bytes
+    procedure :: touched_dofs
+    procedure :: implicit_bytes
     procedure :: apply
     procedure :: local_solve
     procedure :: bytes_per_action
     procedure :: n_applications
+    procedure :: local_operator
+    procedure :: factor_flops
+    procedure :: build_flops
     procedure :: free
   end type f_operator_t
+
+  interface
+    subroutine dpotrf(uplo, n, a, lda, info)
+      import :: dp
+      character(len=1), intent(in) :: uplo
+      integer, intent(in) :: n, lda
+      real(dp), intent(inout) :: a(lda, *)
+      integer, intent(out) :: info
+    end subroutine dpotrf
+    subroutine dpotri(uplo, n, a, lda, info)
+      import :: dp
+      character(len=1), intent(in) :: uplo
+      integer, intent(in) :: n, lda
+      real(dp), intent(inout) :: a(lda, *)
+      integer, intent(out) :: info
+    end subroutine dpotri
+    subroutine dsymv(uplo, n, alpha, a, lda, x, incx, beta, y, incy)
+      import :: dp
+      character(len=1), intent(in) :: uplo
+      integer, intent(in) :: n, lda, incx, incy
+      real(dp), intent(in) :: alpha, beta, a(lda, *), x(*)
+      real(dp), intent(inout) :: y(*)
+    end subroutine dsymv
+    subroutine dspmv(uplo, n, alpha, ap, x, incx, beta, y, incy)
+      import :: dp
+      character(len=1), intent(in) :: uplo
+      integer, intent(in) :: n, incx, incy
+      real(dp), intent(in) :: alpha, beta, ap(*), x(*)
+      real(dp), intent(inout) :: y(*)
+    end subroutine dspmv
+    subroutine dgemv(trans, m, n, alpha, a, lda, x, incx, beta, y, incy)
+      import :: dp
+      character(len=1), intent(in) :: trans
+      integer, intent(in) :: m, n, lda, incx, incy
+      real(dp), intent(in) :: alpha, beta, a(lda, *), x(*)
+      real(dp), intent(inout) :: y(*)
+    end subroutine dgemv
+  end interface
 
 contains
 
@@ -39,6 +119,7 @@ contains
     character(len=*), intent(in) :: local_solver, ordering
     real(dp), intent(in) :: regularization
     integer(ip), intent(in) :: n_concat
+    integer(ip) :: s
     call this%free()
     if (local_solver == 'block') then
       allocate (kplus_block_t :: this%kinv)
@@ -47,7 +128,145 @@ contains
     end if
     call this%kinv%init(subs, regularization, ordering)
     allocate (this%xall(n_concat))
+    this%nsub = size(subs, kind=ip)
+    allocate (this%doff(this%nsub + 1))
+    this%doff(1) = 0
+    do s = 1, this%nsub
+      this%doff(s + 1) = this%doff(s) + subs(s)%ndof
+    end do
+    if (this%doff(this%nsub + 1) /= n_concat) call fatal_error('f_operator%init: n_concat differs from the dofs of subs')
   end subroutine init
+
+  !> Build the explicit local operators S^_s of every local subdomain `subs`
+  !> (K and R assembled) from B (`b`): S^_s = (K_reg^s)^{-1} restricted to the
+  !> n_d dofs B^s touches = the inverse of the Schur complement of K_reg^s on
+  !> them (MUMPS, ICNTL(19), one instance per subdomain, freed at once; K_reg
+  !> exactly as K^+ builds it, kplus::regularized_system), inverted by LAPACK
+  !> (dpotrf, dpotri). Stored as `storage` ('symmetric', 'packed',
+  !> 'general'); F is applied with them from now on. Local (no communication).
+  subroutine build_explicit(this, b, subs, regularization, storage)
+    class(f_operator_t), intent(inout) :: this
+    type(b_operator_t), intent(in) :: b
+    type(subdomain_t), intent(in) :: subs(:)
+    real(dp), intent(in) :: regularization
+    character(len=*), intent(in) :: storage
+    integer(ip), allocatable :: row(:), dof(:), cmap(:), dofs(:), irn(:), jcn(:), perm(:)
+    real(dp), allocatable :: val(:), a(:), sd(:, :)
+    type(mumps_t) :: m
+    integer(ip) :: s, e, ne, ndmax, n, i, j, k
+    integer :: info
+    integer(i8) :: o
+
+    if (storage /= 'symmetric' .and. storage /= 'packed' .and. storage /= 'general') &
+      call fatal_error("f_operator%build_explicit: unknown storage '"//trim(storage)//"'")
+    if (size(subs, kind=ip) /= this%nsub) call fatal_error('f_operator%build_explicit: subs differ from init')
+    this%storage = storage
+    this%n_local_rows = b%n_local_rows()
+    this%nd = this%touched_dofs(b)
+    allocate (this%soff(this%nsub + 1), this%eoff(this%nsub + 1))
+    ne = 0
+    this%eoff(1) = 0
+    this%soff(1) = 0
+    do s = 1, this%nsub
+      call b%subdomain_entries(s, row, dof, val)
+      ne = ne + size(row, kind=ip)
+      this%eoff(s + 1) = ne
+      n = this%nd(s)
+      if (storage == 'packed') then
+        this%soff(s + 1) = this%soff(s) + int(n, i8)*(n + 1)/2
+      else
+        this%soff(s + 1) = this%soff(s) + int(n, i8)*n
+      end if
+    end do
+    allocate (this%erow(ne), this%edof(ne), this%eval(ne), this%smat(this%soff(this%nsub + 1)))
+    ndmax = maxval([0_ip, this%nd])
+    allocate (this%wloc(max(1, this%n_local_rows)), this%wloc2(max(1, this%n_local_rows)), &
+              this%t(max(1, ndmax)), this%u(max(1, ndmax)))
+
+    do s = 1, this%nsub
+      ! B^_s: the entries of B^s with the touched dofs numbered 1..n_d
+      call b%subdomain_entries(s, row, dof, val)
+      dofs = dof
+      call sort_unique(dofs, n)
+      dofs = dofs(1:n)
+      if (allocated(cmap)) deallocate (cmap)
+      allocate (cmap(subs(s)%ndof))
+      cmap = 0
+      do i = 1, n
+        cmap(dofs(i)) = i
+      end do
+      do e = 1, size(row, kind=ip)
+        this%erow(this%eoff(s) + e) = row(e)
+        this%edof(this%eoff(s) + e) = cmap(dof(e))
+        this%eval(this%eoff(s) + e) = val(e)
+      end do
+      if (n == 0) cycle
+      ! the Schur complement of K_reg on the touched dofs (K_reg itself if B touches all)
+      call regularized_system(subs(s), regularization, 'amd', irn, jcn, a, perm)
+      if (allocated(sd)) deallocate (sd)
+      allocate (sd(n, n))
+      if (n == subs(s)%ndof) then
+        sd = 0
+        do k = 1, size(a, kind=ip)
+          i = cmap(irn(k))
+          j = cmap(jcn(k))
+          sd(i, j) = sd(i, j) + a(k)
+          if (i /= j) sd(j, i) = sd(j, i) + a(k)
+        end do
+      else
+        call timer_start('explicit F: Schur')
+        call m%init(MPI_COMM_SELF, spd=.true.)
+        call m%set_centralized(subs(s)%ndof, irn, jcn, a)
+        call m%set_ordering('amd')
+        call m%set_schur(dofs)
+        call m%factorize()
+        call m%schur_complement(sd)
+        this%build_flop_count = this%build_flop_count + m%factor_flops()
+        call m%free()
+        call timer_stop('explicit F: Schur')
+      end if
+      ! S^_s = its inverse (upper triangle): n^3/3 + 2n^3/3 flops
+      this%build_flop_count = this%build_flop_count + real(n, dp)**3
+      call timer_start('explicit F: inverse')
+      call dpotrf('U', n, sd, n, info)
+      if (info == 0) call dpotri('U', n, sd, n, info)
+      if (info /= 0) call fatal_error('f_operator%build_explicit: the Schur complement of K_reg is not '// &
+                                      'positive definite (LAPACK dpotrf/dpotri failed)')
+      call timer_stop('explicit F: inverse')
+      o = this%soff(s)
+      do j = 1, n
+        if (storage == 'packed') then
+          this%smat(o + int(j, i8)*(j - 1)/2 + 1:o + int(j, i8)*(j + 1)/2) = sd(1:j, j)
+        else
+          sd(j + 1:n, j) = sd(j, j + 1:n)
+          this%smat(o + int(j - 1, i8)*n + 1:o + int(j, i8)*n) = sd(:, j)
+        end if
+      end do
+    end do
+    this%explicit = .true.
+  end subroutine build_explicit
+
+  !> n_d of every local subdomain: the number of dofs B^s touches (the
+  !> order of S^_s), without building anything.
+  function touched_dofs(this, b) result(nd)
+    class(f_operator_t), intent(in) :: this
+    type(b_operator_t), intent(in) :: b
+    integer(ip), allocatable :: nd(:)
+    integer(ip), allocatable :: row(:), dof(:)
+    real(dp), allocatable :: val(:)
+    integer(ip) :: s, n
+    allocate (nd(this%nsub))
+    do s = 1, this%nsub
+      call b%subdomain_entries(s, row, dof, val)
+      call sort_unique(dof, n)
+      nd(s) = n
+    end do
+  end function touched_dofs
+
+  logical function is_explicit(this)
+    class(f_operator_t), intent(in) :: this
+    is_explicit = this%explicit
+  end function is_explicit
 
   !> y = F x = B K^+ B^T x (dual vectors, owned rows).
   subroutine apply(this, b, x, y)
@@ -56,13 +275,49 @@ contains
     real(dp), intent(in) :: x(:)
     real(dp), intent(inout) :: y(:)
     call timer_start('F action')
-    this%xall = 0
-    call b%add_transpose(x, 1.0_dp, this%xall)
-    call this%kinv%solve(this%xall)
-    call b%apply_concat(this%xall, y)
+    if (this%explicit) then
+      call apply_explicit(this, b, x, y)
+    else
+      this%xall = 0
+      call b%add_transpose(x, 1.0_dp, this%xall)
+      call this%kinv%solve(this%xall)
+      call b%apply_concat(this%xall, y)
+    end if
     this%applications = this%applications + 1
     call timer_stop('F action')
   end subroutine apply
+
+  !> y = sum_s B^_s S^_s B^_s^T x: gather the rows, one BLAS matrix-vector
+  !> product per subdomain, scatter-add the rows.
+  subroutine apply_explicit(this, b, x, y)
+    type(f_operator_t), intent(inout) :: this
+    type(b_operator_t), intent(inout) :: b
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(inout) :: y(:)
+    integer(ip) :: s, e, n
+    call b%gather_rows(x, this%wloc)
+    this%wloc2 = 0
+    do s = 1, this%nsub
+      n = this%nd(s)
+      if (n == 0) cycle
+      this%t(1:n) = 0
+      do e = this%eoff(s) + 1, this%eoff(s + 1)
+        this%t(this%edof(e)) = this%t(this%edof(e)) + this%eval(e)*this%wloc(this%erow(e))
+      end do
+      select case (this%storage)
+      case ('symmetric')
+        call dsymv('U', n, 1.0_dp, this%smat(this%soff(s) + 1), n, this%t, 1, 0.0_dp, this%u, 1)
+      case ('packed')
+        call dspmv('U', n, 1.0_dp, this%smat(this%soff(s) + 1), this%t, 1, 0.0_dp, this%u, 1)
+      case default
+        call dgemv('N', n, n, 1.0_dp, this%smat(this%soff(s) + 1), n, this%t, 1, 0.0_dp, this%u, 1)
+      end select
+      do e = this%eoff(s) + 1, this%eoff(s + 1)
+        this%wloc2(this%erow(e)) = this%wloc2(this%erow(e)) + this%eval(e)*this%u(this%edof(e))
+      end do
+    end do
+    call b%scatter_rows(this%wloc2, y)
+  end subroutine apply_explicit
 
   !> x <- K^+ x for the concatenated vector of all local subdomains.
   subroutine local_solve(this, x)
@@ -73,19 +328,107 @@ contains
     call this%kinv%solve(x)
   end subroutine local_solve
 
-  !> Bytes one F action must read on this rank: the factors of K_reg twice
-  !> (forward and backward substitution) and the entries of B twice (B^T,
-  !> then B; 16 bytes each: value, row, dof). Vectors are not counted.
+  !> Bytes one implicit F action reads and writes on this rank: the factors
+  !> of K_reg twice (forward and backward substitution), the entries of B
+  !> twice (B^T, then B; 16 bytes each: value, row, dof), and the vectors:
+  !> 12 passes over the concatenated primal vector (zeroed, B^T added: read
+  !> and write, copied into MUMPS's buffer and back: 4, forward and backward
+  !> substitution: read and write each, B read once) and 4 over the local
+  !> dual rows (gather, scatter).
+  integer(i8) function implicit_bytes(this, b)
+    class(f_operator_t), intent(in) :: this
+    type(b_operator_t), intent(in) :: b
+    implicit_bytes = 2*this%kinv%factor_bytes() + 2*16*b%n_entries() + 12*8*int(size(this%xall), i8) + &
+                     4*8*int(b%n_local_rows(), i8)
+  end function implicit_bytes
+
+  !> Bytes one explicit F action reads and writes on this rank: what BLAS
+  !> reads of every S^_s (the upper triangle, n_d (n_d+1)/2 values, for
+  !> 'symmetric' and 'packed'; n_d^2 for 'general'), the entries of B^_s twice
+  !> (16 bytes each) and 4 passes over the local dual rows (gather, zero,
+  !> scatter). The short vectors t, u of one subdomain stay in cache.
+  !> `storage` and `nd` give the figure before the operators are built.
+  integer(i8) function explicit_bytes(this, b, storage, nd)
+    class(f_operator_t), intent(in) :: this
+    type(b_operator_t), intent(in) :: b
+    character(len=*), intent(in) :: storage
+    integer(ip), intent(in) :: nd(:)
+    integer(ip) :: s
+    explicit_bytes = 2*16*b%n_entries() + 4*8*int(b%n_local_rows(), i8)
+    do s = 1, size(nd, kind=ip)
+      if (storage == 'general') then
+        explicit_bytes = explicit_bytes + 8*int(nd(s), i8)*nd(s)
+      else
+        explicit_bytes = explicit_bytes + 8*(int(nd(s), i8)*(nd(s) + 1)/2)
+      end if
+    end do
+  end function explicit_bytes
+
+  !> Bytes one F action reads and writes on this rank, in the mode in use.
   integer(i8) function bytes_per_action(this, b)
     class(f_operator_t), intent(in) :: this
     type(b_operator_t), intent(in) :: b
-    bytes_per_action = 2*this%kinv%factor_bytes() + 2*16*b%n_entries()
+    if (this%explicit) then
+      bytes_per_action = this%explicit_bytes(b, this%storage, this%nd)
+    else
+      bytes_per_action = this%implicit_bytes(b)
+    end if
   end function bytes_per_action
 
   integer(i8) function n_applications(this)
     class(f_operator_t), intent(in) :: this
     n_applications = this%applications
   end function n_applications
+
+  !> The dense F^s = B^_s S^_s B^_s^T of local subdomain `s` on its local
+  !> dual rows `rows` (for tests); needs build_explicit.
+  subroutine local_operator(this, s, rows, fs)
+    class(f_operator_t), intent(in) :: this
+    integer(ip), intent(in) :: s
+    integer(ip), allocatable, intent(out) :: rows(:)
+    real(dp), allocatable, intent(out) :: fs(:, :)
+    real(dp), allocatable :: sf(:, :)
+    integer(ip) :: n, i, j, e1, e2, nb
+    integer(i8) :: o
+    if (.not. this%explicit) call fatal_error('f_operator%local_operator: the explicit operators are not built')
+    n = this%nd(s)
+    o = this%soff(s)
+    allocate (sf(n, n))
+    do j = 1, n
+      do i = 1, n
+        if (this%storage == 'packed') then
+          sf(i, j) = this%smat(o + int(max(i, j), i8)*(max(i, j) - 1)/2 + min(i, j))
+        else if (this%storage == 'symmetric') then
+          sf(i, j) = this%smat(o + int(max(i, j) - 1, i8)*n + min(i, j))
+        else
+          sf(i, j) = this%smat(o + int(j - 1, i8)*n + i)
+        end if
+      end do
+    end do
+    nb = this%eoff(s + 1) - this%eoff(s)
+    rows = this%erow(this%eoff(s) + 1:this%eoff(s + 1))
+    allocate (fs(nb, nb))
+    do j = 1, nb
+      e2 = this%eoff(s) + j
+      do i = 1, nb
+        e1 = this%eoff(s) + i
+        fs(i, j) = this%eval(e1)*sf(this%edof(e1), this%edof(e2))*this%eval(e2)
+      end do
+    end do
+  end subroutine local_operator
+
+  !> Floating-point operations of the factorization of K^+ (MUMPS's count).
+  real(dp) function factor_flops(this)
+    class(f_operator_t), intent(in) :: this
+    factor_flops = 0
+    if (allocated(this%kinv)) factor_flops = this%kinv%factor_flops()
+  end function factor_flops
+
+  !> Floating-point operations of build_explicit (0 if not built).
+  real(dp) function build_flops(this)
+    class(f_operator_t), intent(in) :: this
+    build_flops = this%build_flop_count
+  end function build_flops
 
   subroutine free(this)
     class(f_operator_t), intent(inout) :: this
@@ -94,6 +437,13 @@ contains
       deallocate (this%kinv)
     end if
     if (allocated(this%xall)) deallocate (this%xall)
+    if (allocated(this%doff)) deallocate (this%doff)
+    if (allocated(this%nd)) deallocate (this%nd, this%soff, this%eoff, this%erow, this%edof, this%eval)
+    if (allocated(this%smat)) deallocate (this%smat)
+    if (allocated(this%wloc)) deallocate (this%wloc, this%wloc2, this%t, this%u)
+    this%explicit = .false.
+    this%build_flop_count = 0
     this%applications = 0
+    this%nsub = 0
   end subroutine free
 end module f_operator

@@ -55,6 +55,10 @@ contains
     allocate (this%xall(this%b%n_concat()))
     call timer_stop('B and G')
 
+    call timer_start('explicit F')
+    call choose_f_action(this, p)
+    call timer_stop('explicit F')
+
     call timer_start('coarse setup')
     call this%proj%init(this%dec, this%b, comm, p%solver)
     call timer_stop('coarse setup')
@@ -112,6 +116,51 @@ contains
       if (len_trim(msg) > 0) call collective_error(msg, comm, exit_input_error)
     end subroutine check_coarse_ranks
   end subroutine setup
+
+  !> `&solver f_action`: build the explicit local operators for 'explicit',
+  !> or for 'auto' when the cost model says they pay (the same choice on all
+  !> ranks, from global sums). The model, measured (docs/RESULTS.md, "Speed
+  !> (issue 16)"): both F actions are memory bound, so one explicit action
+  !> saves time in proportion to the bytes it saves, I - E (implicit minus
+  !> explicit bytes per action); the build costs in proportion to sum n_d^3
+  !> (the Schur complement and its inverse, dense). Explicit is chosen when
+  !> E < I and sum n_d^3 / (I - E) <= `payback_flops_per_byte`, which is the
+  !> ratio at which the build is paid back after about 100 F actions (the
+  !> weak-scaling cubes at tol = 1e-6 need 110-140).
+  subroutine choose_f_action(this, p)
+    class(feti_t), intent(inout) :: this
+    type(params_t), intent(in) :: p
+    real(dp), parameter :: payback_flops_per_byte = 150
+    integer(i8) :: mine(3), all(3)
+    integer(ip), allocatable :: nd(:)
+    integer :: ierr
+    logical :: use_explicit
+    real(dp) :: ratio
+    character(len=240) :: line
+    select case (p%solver%f_action)
+    case ('explicit')
+      use_explicit = .true.
+    case ('implicit')
+      use_explicit = .false.
+    case default
+      nd = this%f%touched_dofs(this%b)
+      mine = [this%f%implicit_bytes(this%b), this%f%explicit_bytes(this%b, p%solver%f_storage, nd), &
+              sum(int(nd, i8)**3)]
+      call MPI_Allreduce(mine, all, 3, MPI_INT_I8, MPI_SUM, this%communicator, ierr)
+      ratio = real(all(3), dp)/max(1.0_dp, real(all(1) - all(2), dp))
+      use_explicit = all(2) < all(1) .and. ratio <= payback_flops_per_byte
+      write (line, '(a,es10.3,a,es10.3,a,f0.1,a)') 'F action (auto): implicit ', real(all(1), dp), &
+        ' bytes, explicit ', real(all(2), dp), ' bytes per action on all ranks; build/saving ', ratio, &
+        ' flop per byte'
+      call log_message(line)
+    end select
+    if (use_explicit) then
+      call this%f%build_explicit(this%b, this%subs, p%solver%regularization, p%solver%f_storage)
+      call log_message('F action: explicit local operators ('//trim(p%solver%f_storage)//')')
+    else
+      call log_message('F action: implicit (K^+ solves)')
+    end if
+  end subroutine choose_f_action
 
   !> ||P F P|| by the power method on Im P, from a keyed random start. It
   !> stops when the estimate changes by less than 1e-3 relative or after

@@ -96,6 +96,9 @@ module feti_operators
     procedure :: largest_copy_spread
     procedure :: norm_pfp
     procedure :: f_applications
+    procedure :: f_explicit
+    procedure :: f_local_operator
+    procedure :: setup_flops
     procedure :: coarse_solves
     procedure :: coarse_factor
     procedure :: free
@@ -412,6 +415,30 @@ contains
     class(feti_t), intent(in) :: this
     f_applications = this%f%n_applications()
   end function f_applications
+
+  !> True when F is applied with the explicit local operators.
+  logical function f_explicit(this)
+    class(feti_t), intent(in) :: this
+    f_explicit = this%f%is_explicit()
+  end function f_explicit
+
+  !> The dense F^s of local subdomain `ls` on its local dual rows `rows`
+  !> (explicit F only; for tests).
+  subroutine f_local_operator(this, ls, rows, fs)
+    class(feti_t), intent(in) :: this
+    integer(ip), intent(in) :: ls
+    integer(ip), allocatable, intent(out) :: rows(:)
+    real(dp), allocatable, intent(out) :: fs(:, :)
+    call this%f%local_operator(ls, rows, fs)
+  end subroutine f_local_operator
+
+  !> Floating-point operations on this rank of the factorization of K^+ and
+  !> of the explicit local operators' build (0 if implicit).
+  function setup_flops(this) result(v)
+    class(feti_t), intent(in) :: this
+    real(dp) :: v(2)
+    v = [this%f%factor_flops(), this%f%build_flops()]
+  end function setup_flops
 
   integer(i8) function coarse_solves(this)
     class(feti_t), intent(in) :: this

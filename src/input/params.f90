@@ -72,6 +72,10 @@ module params
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
     character(len=name_len) :: local_solver = 'block'    !< 'block' | 'subdomain'
+    !> how F is applied: 'implicit' (K^+ solves) | 'explicit' (dense local
+    !> operators, BLAS) | 'auto' (the cheaper one by the measured cost model)
+    character(len=name_len) :: f_action = 'implicit'
+    character(len=name_len) :: f_storage = 'packed'      !< explicit F: 'packed' | 'symmetric' | 'general'
     !> 'auto' (coarse_ranks decides) | 'redundant' (= coarse_ranks 1) | 'distributed' (= all ranks)
     character(len=name_len) :: coarse_placement = 'auto'
     integer(ip) :: coarse_ranks = 0           !< ranks per coarse group (0: chosen from the coarse dimension)
@@ -466,7 +470,7 @@ contains
                 regularization, active_tol, kkt_tol
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
-                               m_no_step
+                               m_no_step, f_action, f_storage
     character(len=path_len) :: directory
     logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report, coarse_ooc
     namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping
@@ -477,6 +481,7 @@ contains
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
       m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, power_iterations, coarse, &
       coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
+      f_action, f_storage, &
       regularization, scaling, stopping, monitor
     namelist /reconstruction/ method, active_tol, kkt_tol
     character(len=name_len) :: run_name
@@ -519,6 +524,7 @@ contains
         rho_growth = s%rho_growth; rho_contraction = s%rho_contraction
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
+        f_action = s%f_action; f_storage = s%f_storage
         coarse_placement = s%coarse_placement; coarse_ranks = s%coarse_ranks
         coarse_blr = s%coarse_blr; coarse_ooc = s%coarse_ooc
         regularization = s%regularization; scaling = s%scaling; stopping = s%stopping; monitor = s%monitor
@@ -554,8 +560,8 @@ contains
                                  rho_scale, m_scale, beta, eta_scale, lower(m_no_step), rho_growth, &
                                  rho_contraction, power_iterations, &
                                  lower(coarse), &
-                                 lower(local_ordering), lower(local_solver), lower(coarse_placement), &
-                                 coarse_ranks, coarse_blr, coarse_ooc, &
+                                 lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
+                                 lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, &
                                  regularization, lower(scaling), lower(stopping), monitor)
     case ('reconstruction')
       p%reconstruction = reconstruction_params_t(lower(method), active_tol, kkt_tol)
@@ -642,6 +648,10 @@ contains
         call fail('solver', 'coarse_blr', 'must be in [0, 1) (0: full-rank factors)', reals([s%coarse_blr]))
       if (.not. one_of(s%local_solver, [character(len=10) :: 'block', 'subdomain'])) &
         call fail('solver', 'local_solver', "must be 'block' or 'subdomain'", s%local_solver)
+      if (.not. one_of(s%f_action, [character(len=10) :: 'implicit', 'explicit', 'auto'])) &
+        call fail('solver', 'f_action', "must be 'implicit', 'explicit' or 'auto'", s%f_action)
+      if (.not. one_of(s%f_storage, [character(len=10) :: 'symmetric', 'packed', 'general'])) &
+        call fail('solver', 'f_storage', "must be 'symmetric', 'packed' or 'general'", s%f_storage)
       if (s%regularization <= 0) &
         call fail('solver', 'regularization', 'must be > 0', reals([s%regularization]))
       if (.not. one_of(s%scaling, [character(len=8) :: 'none', 'young'])) &

@@ -3,7 +3,7 @@
 !> BLAS and the F action's bandwidth (docs/OUTPUT.md). Rank 0 of the
 !> dualization's communicator writes.
 module run_report
-  use kinds, only: dp, ip, i8, MPI_INT_I8
+  use kinds, only: dp, ip, i8, MPI_INT_I8, MPI_REAL_DP
   use timers, only: timer_stat_t
   use logger, only: log_message
   use params, only: params_t, param_item_t, param_items, default_params
@@ -41,7 +41,7 @@ contains
     type(feti_sizes_t) :: n
     character(len=:), allocatable :: memory
     integer(i8) :: f_bytes
-    real(dp) :: f_seconds
+    real(dp) :: f_seconds, flops(2)
     integer :: nranks, ierr
 
     op => dual%operators()
@@ -50,6 +50,7 @@ contains
     memory = memory_json(op%comm())
     ! bytes one F action reads on all ranks, and the time of one F action
     call MPI_Allreduce(op%bytes_per_f_action(), f_bytes, 1, MPI_INT_I8, MPI_SUM, op%comm(), ierr)
+    call MPI_Allreduce(op%setup_flops(), flops, 2, MPI_REAL_DP, MPI_SUM, op%comm(), ierr)
     f_seconds = stat_max(stats, 'F action', 0.0_dp)/max(op%f_applications(), 1_i8)
 
     call js%begin_object()
@@ -120,6 +121,8 @@ contains
     end associate
     call js%begin_object('performance')
     call js%add('f_bytes_per_action_sum', f_bytes)
+    call js%add('f_action', trim(merge('explicit', 'implicit', op%f_explicit())))
+    call js%add_each([character(len=32) :: 'factorization_flops_sum', 'explicit_f_flops_sum'], flops)
     call js%add_each([character(len=32) :: 'f_action_seconds_per_call', 'f_bandwidth_bytes_per_second', &
                       'solve_seconds', 'solve_f_action_seconds', 'solve_coarse_seconds', 'solve_coarse_share'], &
                      [f_seconds, real(f_bytes, dp)/max(f_seconds, tiny(1.0_dp)), seconds(1), seconds(2), seconds(3), &

@@ -70,6 +70,7 @@ module kplus
     procedure :: solve
     procedure :: solve_many
     procedure :: factor_bytes
+    procedure :: factor_flops
     procedure :: free
   end type kplus_t
 
@@ -134,6 +135,12 @@ contains
     class(kplus_t), intent(in) :: this
     factor_bytes = this%solver%factor_bytes()
   end function factor_bytes
+
+  !> Floating-point operations of the factorization (MUMPS's count).
+  real(dp) function factor_flops(this)
+    class(kplus_t), intent(in) :: this
+    factor_flops = this%solver%factor_flops()
+  end function factor_flops
 
   !> Release the factorization. Safe on a never initialized object.
   subroutine free(this)

@@ -27,6 +27,7 @@ module kplus_block
     procedure :: init
     procedure :: solve
     procedure :: factor_bytes
+    procedure :: factor_flops
     procedure :: free
   end type kplus_block_t
 
@@ -115,6 +116,13 @@ contains
     factor_bytes = 0
     if (this%factorized) factor_bytes = this%solver%factor_bytes()
   end function factor_bytes
+
+  !> Floating-point operations of the factorization (MUMPS's RINFOG(3)).
+  real(dp) function factor_flops(this)
+    class(kplus_block_t), intent(in) :: this
+    factor_flops = 0
+    if (this%factorized) factor_flops = this%solver%factor_flops()
+  end function factor_flops
 
   subroutine free(this)
     class(kplus_block_t), intent(inout) :: this

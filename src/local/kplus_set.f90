@@ -15,6 +15,7 @@ module kplus_set
     procedure :: init
     procedure :: solve
     procedure :: factor_bytes
+    procedure :: factor_flops
     procedure :: free
   end type kplus_set_t
 
@@ -54,6 +55,16 @@ contains
       factor_bytes = factor_bytes + this%kplus(s)%factor_bytes()
     end do
   end function factor_bytes
+
+  real(dp) function factor_flops(this)
+    class(kplus_set_t), intent(in) :: this
+    integer(ip) :: s
+    factor_flops = 0
+    if (.not. allocated(this%kplus)) return
+    do s = 1, size(this%kplus, kind=ip)
+      factor_flops = factor_flops + this%kplus(s)%factor_flops()
+    end do
+  end function factor_flops
 
   subroutine free(this)
     class(kplus_set_t), intent(inout) :: this

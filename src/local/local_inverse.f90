@@ -15,6 +15,7 @@ module local_inverse
     procedure(init_iface), deferred :: init
     procedure(solve_iface), deferred :: solve
     procedure(bytes_iface), deferred :: factor_bytes
+    procedure(flops_iface), deferred :: factor_flops
     procedure(free_iface), deferred :: free
   end type local_inverse_t
 
@@ -42,6 +43,12 @@ module local_inverse
       import :: local_inverse_t, i8
       class(local_inverse_t), intent(in) :: this
     end function bytes_iface
+
+    !> Floating-point operations of the factorizations (MUMPS's count).
+    real(dp) function flops_iface(this)
+      import :: local_inverse_t, dp
+      class(local_inverse_t), intent(in) :: this
+    end function flops_iface
 
     !> Release the factorizations; safe on a never initialized object.
     subroutine free_iface(this)
