@@ -1,0 +1,145 @@
+!> The FETI preconditioners of the dual operator F = B K^+ B^T (`&solver
+!> preconditioner`):
+!>
+!>     M^{-1} = sum_s B_D^s A_s B_D^s^T,   B_D^s = B^s / w_s,
+!>
+!> with w_s = E_s/young the weight of subdomain s that the rows of B use
+!> with `&solver scaling = 'young'` (1 with 'none'), so that
+!> B diag(1/w) B^T = I per node on the gluing and Dirichlet rows, and
+!> - 'lumped':    A_s = K_s, one sparse product with the local K;
+!> - 'dirichlet': A_s = S_s, the Schur complement of K_s on the dofs that B
+!>   touches (schur_complement: one K_ii solve of all the rank's subdomains
+!>   and two products with K per application).
+!> Applied like F: dual vector -> B^T (neighbour exchange) -> local ->
+!> B (exchange back). M^{-1} is symmetric positive semidefinite, and positive
+!> definite on the range of P (docs/THEORY.md "Preconditioned MPRGP").
+!> Timer 'preconditioner'.
+module dual_preconditioner
+  use kinds, only: dp, ip, i8, name_len
+  use errors, only: fatal_error
+  use timers, only: timer_start, timer_stop
+  use subdomain, only: subdomain_t
+  use b_operator, only: b_operator_t
+  use constraints, only: constraints_t
+  use schur_complement, only: schur_complement_t
+  implicit none
+  private
+
+  type, public :: dual_preconditioner_t
+    private
+    character(len=name_len) :: kind_name = 'none'
+    type(b_operator_t), pointer :: b => null()
+    type(subdomain_t), pointer :: subs(:) => null()
+    real(dp), allocatable :: inv_w(:)           !< (nlocal) 1/w_s
+    real(dp), allocatable :: xall(:), yall(:)   !< work: concatenated primal vectors
+    type(schur_complement_t) :: schur
+    integer(i8) :: applications = 0
+  contains
+    procedure :: init
+    procedure :: apply
+    procedure :: kind
+    procedure :: n_applications
+    procedure :: factor_bytes
+    procedure :: free
+  end type dual_preconditioner_t
+
+contains
+
+  !> `kind`: 'lumped' or 'dirichlet'; `b` and `subs` (K assembled) must
+  !> outlive the preconditioner; `weights(ls)` = w_s of local subdomain ls.
+  subroutine init(this, kind, b, subs, weights)
+    class(dual_preconditioner_t), intent(inout) :: this
+    character(len=*), intent(in) :: kind
+    type(b_operator_t), intent(inout), target :: b
+    type(subdomain_t), intent(in), target :: subs(:)
+    real(dp), intent(in) :: weights(:)
+    type(constraints_t), pointer :: con
+    logical, allocatable :: on_interface(:)
+    integer(ip) :: ls, e, r(2)
+
+    call this%free()
+    if (kind /= 'lumped' .and. kind /= 'dirichlet') &
+      call fatal_error("dual_preconditioner: kind must be 'lumped' or 'dirichlet', got '"//trim(kind)//"'")
+    if (size(weights) /= size(subs)) call fatal_error('dual_preconditioner: one weight per local subdomain')
+    if (any(.not. weights > 0)) call fatal_error('dual_preconditioner: the subdomain weights must be > 0')
+    this%kind_name = kind
+    this%b => b
+    this%subs => subs
+    this%inv_w = 1/weights
+    allocate (this%xall(b%n_concat()), this%yall(b%n_concat()))
+    if (kind == 'dirichlet') then
+      ! the interface: every dof with an entry of B (gluing, Dirichlet, contact)
+      con => b%constraints()
+      allocate (on_interface(b%n_concat()))
+      on_interface = .false.
+      do ls = 1, size(subs, kind=ip)
+        r = b%dof_range(ls)
+        do e = 1, con%b(ls)%nentries
+          on_interface(r(1) - 1 + con%b(ls)%dof(e)) = .true.
+        end do
+      end do
+      call this%schur%init(subs, on_interface)
+    end if
+  end subroutine init
+
+  !> y = M^{-1} x (dual vectors, owned rows). Collective.
+  subroutine apply(this, x, y)
+    class(dual_preconditioner_t), intent(inout) :: this
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(inout) :: y(:)
+    integer(ip) :: ls, r(2)
+    if (.not. associated(this%b)) call fatal_error('dual_preconditioner: apply before init')
+    call timer_start('preconditioner')
+    this%xall = 0
+    call this%b%add_transpose(x, 1.0_dp, this%xall)
+    do ls = 1, size(this%subs, kind=ip)
+      r = this%b%dof_range(ls)
+      this%xall(r(1):r(2)) = this%inv_w(ls)*this%xall(r(1):r(2))
+    end do
+    if (this%kind_name == 'dirichlet') then
+      call this%schur%apply(this%subs, this%xall)
+      this%yall = this%xall
+    else
+      do ls = 1, size(this%subs, kind=ip)
+        r = this%b%dof_range(ls)
+        call this%subs(ls)%K%matvec(this%xall(r(1):r(2)), this%yall(r(1):r(2)))
+      end do
+    end if
+    do ls = 1, size(this%subs, kind=ip)
+      r = this%b%dof_range(ls)
+      this%yall(r(1):r(2)) = this%inv_w(ls)*this%yall(r(1):r(2))
+    end do
+    call this%b%apply_concat(this%yall, y)
+    this%applications = this%applications + 1
+    call timer_stop('preconditioner')
+  end subroutine apply
+
+  !> 'none' before init, else 'lumped' or 'dirichlet'.
+  function kind(this) result(name)
+    class(dual_preconditioner_t), intent(in) :: this
+    character(len=:), allocatable :: name
+    name = trim(this%kind_name)
+  end function kind
+
+  integer(i8) function n_applications(this)
+    class(dual_preconditioner_t), intent(in) :: this
+    n_applications = this%applications
+  end function n_applications
+
+  !> Bytes of the K_ii factors ('dirichlet'; 0 otherwise).
+  integer(i8) function factor_bytes(this)
+    class(dual_preconditioner_t), intent(in) :: this
+    factor_bytes = this%schur%factor_bytes()
+  end function factor_bytes
+
+  subroutine free(this)
+    class(dual_preconditioner_t), intent(inout) :: this
+    call this%schur%free()
+    if (allocated(this%inv_w)) deallocate (this%inv_w)
+    if (allocated(this%xall)) deallocate (this%xall, this%yall)
+    this%b => null()
+    this%subs => null()
+    this%kind_name = 'none'
+    this%applications = 0
+  end subroutine free
+end module dual_preconditioner
