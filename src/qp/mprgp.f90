@@ -97,7 +97,7 @@ module mprgp
   implicit none
   private
 
-  public :: ensure_size
+  public :: ensure_size, preconditioned_free_gradient
 
   !> A stopping rule asked once per iteration (and at the start) by minimize.
   type, abstract, public :: mprgp_stop_t
@@ -423,14 +423,24 @@ contains
     class(qp_problem_t), intent(inout) :: problem
     real(dp), intent(in) :: x(:), g(:)
     real(dp), intent(inout) :: v(:)
-    integer(ip) :: i
-    call gradient_part(problem, x, g, .false., self%w_g)
-    call problem%precondition(self%w_g, v)
+    call preconditioned_free_gradient(problem, x, g, self%w_g, v)
     self%n_preconditioner = self%n_preconditioner + 1
-    do i = 1, problem%n
-      if (.not. x(i) > problem%lower(i)) v(i) = 0
-    end do
   end subroutine free_direction
+
+  !> z = R_F M_A^{-1} R_F g at x: phi (into `work`), the problem's
+  !> preconditioner applied to it, and z_i = 0 where x_i is at its bound.
+  !> Collective.
+  subroutine preconditioned_free_gradient(problem, x, g, work, z)
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(in) :: x(:), g(:)
+    real(dp), intent(inout) :: work(:), z(:)
+    integer(ip) :: i
+    call gradient_part(problem, x, g, .false., work)
+    call problem%precondition(work, z)
+    do i = 1, problem%n
+      if (.not. x(i) > problem%lower(i)) z(i) = 0
+    end do
+  end subroutine preconditioned_free_gradient
 
   !> Second half of an expansion step, from the half step x (at the
   !> boundary) with gradient g: x <- P(x - alpha_e phi(x)), g recomputed.
