@@ -82,12 +82,16 @@ module mumps_wrapper
     procedure :: set_distributed
     procedure :: set_ordering
     procedure :: set_block_size
+    procedure :: set_low_rank
+    procedure :: set_out_of_core
     procedure :: factorize
     procedure, private :: solve_matrix
     procedure, private :: solve_vector
     generic :: solve => solve_matrix, solve_vector
     procedure :: factor_bytes
     procedure :: factor_entries
+    procedure :: factor_entries_effective
+    procedure :: memory_mb
     procedure :: order
     procedure :: is_factorized
     procedure :: free
@@ -247,6 +251,41 @@ contains
     this%id%ICNTL(15) = merge(0, -k, k == 1)
   end subroutine set_block_size
 
+  !> Block low-rank (BLR) factorization for the next analysis and
+  !> factorization: ICNTL(35) = 2 (BLR factorization, the factors kept in
+  !> low-rank form, so they take less memory, and used so by the solve) with the
+  !> dropping tolerance CNTL(7) = `epsilon` (relative; the solve's error grows
+  !> with it). `epsilon` = 0 switches BLR off (ICNTL(35) = 0).
+  subroutine set_low_rank(this, epsilon)
+    class(mumps_t), intent(inout) :: this
+    real(dp), intent(in) :: epsilon
+    call require_active(this, 'set_low_rank')
+    if (epsilon < 0) call fatal_error('mumps_wrapper: set_low_rank: epsilon must be >= 0')
+    if (epsilon == 0) then
+      this%id%ICNTL(35) = 0
+    else
+      this%id%ICNTL(35) = 2
+      this%id%CNTL(7) = epsilon
+    end if
+  end subroutine set_low_rank
+
+  !> Out-of-core factors (ICNTL(22) = 1): MUMPS writes the factors to files in
+  !> `directory` (OOC_TMPDIR, at most 255 characters; without it MUMPS takes
+  !> the environment variable MUMPS_OOC_TMPDIR, else /tmp) during the
+  !> factorization and reads them back in every solve; only the active fronts
+  !> stay in memory. The files are deleted by `free` (JOB = -2).
+  subroutine set_out_of_core(this, directory)
+    class(mumps_t), intent(inout) :: this
+    character(len=*), intent(in), optional :: directory
+    call require_active(this, 'set_out_of_core')
+    this%id%ICNTL(22) = 1
+    this%id%OOC_PREFIX = 'feticontact_'
+    if (.not. present(directory)) return
+    if (len_trim(directory) > len(this%id%OOC_TMPDIR)) &
+      call fatal_error('mumps_wrapper: set_out_of_core: directory name longer than 255 characters')
+    this%id%OOC_TMPDIR = directory
+  end subroutine set_out_of_core
+
   !> Analysis (JOB = 1) and numerical factorization (JOB = 2). Collective.
   !> The wrapper's copy of the matrix and of the pivot order are released
   !> afterwards.
@@ -345,6 +384,24 @@ contains
     factor_entries = 0
     if (this%factorized) factor_entries = count_of(this%id%INFOG(29))
   end function factor_entries
+
+  !> Entries of the factors after BLR compression (INFOG(35)), summed over
+  !> the ranks; equals factor_entries without BLR. 0 before a factorization.
+  integer(i8) function factor_entries_effective(this)
+    class(mumps_t), intent(in) :: this
+    factor_entries_effective = 0
+    if (this%factorized) factor_entries_effective = count_of(this%id%INFOG(35))
+  end function factor_entries_effective
+
+  !> Memory MUMPS used in the factorization, in MB (10^6 bytes): the most on
+  !> one rank (INFOG(21)) and the sum over the ranks (INFOG(22)). With
+  !> out-of-core factors this is the in-core part. 0 before a factorization.
+  function memory_mb(this) result(mb)
+    class(mumps_t), intent(in) :: this
+    integer(i8) :: mb(2)
+    mb = 0
+    if (this%factorized) mb = [int(this%id%INFOG(21), i8), int(this%id%INFOG(22), i8)]
+  end function memory_mb
 
   !> Order of the matrix.
   integer(ip) function order(this)

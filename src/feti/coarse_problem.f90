@@ -1,5 +1,5 @@
 !> The coarse problem (CP): G G^T with G = R^T B^T, assembled in distributed
-!> form and factorized once by MUMPS; solves with it.
+!> form and factorized by MUMPS on groups of ranks; solves with it.
 !>
 !> Coarse vectors have 6 entries per subdomain. Each rank stores the blocks of
 !> its own subdomains ("local coarse blocks", in the order of its local
@@ -16,12 +16,21 @@
 !> An optional row mask restricts the sum to some rows: the standard
 !> reconstruction's G_A G_A^T uses the same code.
 !>
-!> Placement (&solver coarse_placement): 'distributed' factorizes with MUMPS
-!> on all ranks of the communicator (distributed input, centralized RHS on
-!> rank 0, solution scattered back); 'redundant' gathers the matrix on every
-!> rank and factorizes it there on MPI_COMM_SELF, so that a solve is one
-!> MPI_Allgatherv of the right-hand side and a local MUMPS solve, with no
-!> message inside MUMPS.
+!> Rank groups (&solver coarse_ranks, the paper's subcommunicators): the P
+!> ranks of the communicator form ngroups = max(1, P / c) groups of
+!> consecutive ranks, c = ranks per group; rank r is in group
+!> floor(r ngroups / P), so when c does not divide P the groups differ by one
+!> rank at most (P = 5, c = 2: ranks {0,1,2} and {3,4}). Every group holds
+!> one MUMPS factorization of the whole G G^T on its subcommunicator
+!> (distributed assembled input; on a group of one rank, centralized input on
+!> that rank). Each rank sends its COO entries to one member of every group
+!> (one MPI_Alltoallv). A solve gathers the group's blocks to the group's
+!> first rank (MPI_Gatherv), the first ranks of all groups exchange their
+!> parts (MPI_Allgatherv), MUMPS solves on the group, and the first rank
+!> scatters the solution inside the group (MPI_Scatterv). c = 1 is the old
+!> 'redundant' placement (every rank factorizes alone; a solve is one
+!> MPI_Allgatherv and a local MUMPS solve), c = P the old 'distributed' one
+!> (one factorization on all ranks; a solve gathers to rank 0 and scatters).
 module coarse_problem
   use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_IP
   use decomposition, only: decomposition_t, subdomain_graph
@@ -30,11 +39,27 @@ module coarse_problem
   use mumps_wrapper, only: mumps_t
   use block_hash, only: block_hash_t
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gatherv, MPI_Scatterv, MPI_Wtime, &
-                     MPI_Allgather, MPI_Allgatherv, MPI_INTEGER, MPI_COMM_SELF
+                     MPI_Allgatherv, MPI_Alltoall, MPI_Alltoallv, MPI_INTEGER, MPI_Comm_split, &
+                     MPI_Comm_free, MPI_COMM_NULL, MPI_UNDEFINED, MPI_IN_PLACE, &
+                     operator(/=)
   implicit none
   private
 
   public :: coarse_layout_t, build_coarse_layout, owned_row_blocks, row_blocks
+  public :: coarse_options_t, group_starts, choose_coarse_ranks, estimated_factor_bytes
+
+  !> How the coarse problem is factorized (&solver coarse_ranks, coarse_blr,
+  !> coarse_ooc).
+  type, public :: coarse_options_t
+    integer :: ranks_per_group = 0          !< c; 0 or more than the ranks: one group of all ranks
+    real(dp) :: blr = 0                     !< MUMPS BLR dropping tolerance (0: full rank)
+    logical :: ooc = .false.                !< MUMPS out-of-core factors
+  end type coarse_options_t
+
+  !> Automatic ranks per group: the estimated factor of G G^T divided among
+  !> a group's ranks should stay below this many bytes per rank (see
+  !> choose_coarse_ranks and docs/INPUT.md).
+  integer(i8), parameter, public :: coarse_bytes_per_rank = 1073741824_i8
 
   !> Where the coarse blocks of every subdomain live.
   type :: coarse_layout_t
@@ -53,13 +78,26 @@ module coarse_problem
     type(mumps_t) :: mumps
     real(dp), allocatable :: rhs(:, :)      !< (n, 1) on rank 0
     logical :: factorized = .false.
-    logical :: redundant = .false.          !< every rank holds the whole factorization
     integer :: rank = 0
     real(dp) :: seconds_factorization = 0   !< MUMPS analysis + factorization in init
+    ! rank groups (see the module documentation)
+    integer :: ngroups = 1, group = 0, group_rank = 0, group_size = 1
+    type(MPI_Comm) :: group_comm            !< this rank's group (MUMPS runs on it)
+    type(MPI_Comm) :: roots_comm            !< the first ranks of all groups (MPI_COMM_NULL elsewhere)
+    logical :: have_comms = .false.
+    integer :: group_offset = 0             !< global coarse offset of the group's first entry
+    integer :: group_length = 0             !< coarse entries of the group's ranks
+    integer, allocatable :: gcounts(:), gdispls(:)  !< per member: entries, offsets in the group part
+    integer, allocatable :: rcounts(:), rdispls(:)  !< per group: entries, global offsets (roots)
   contains
     procedure :: init
     procedure :: solve
     procedure :: factorization_seconds
+    procedure :: ranks_per_group
+    procedure :: groups
+    procedure :: factor_entries
+    procedure :: factor_entries_effective
+    procedure :: mumps_memory_mb
     procedure :: free
   end type coarse_problem_t
 
@@ -103,14 +141,18 @@ contains
 
   !> Assemble G G^T (or G_A G_A^T with `mask`) and factorize it. `con%b(:)%g`
   !> must hold the entries of G^T. Collective.
-  subroutine init(this, dec, con, layout, comm, mask, placement)
+  !> `options`: the rank groups and MUMPS's BLR / out-of-core settings
+  !> (default: one group of all ranks, full-rank in-core factors).
+  subroutine init(this, dec, con, layout, comm, mask, options)
     class(coarse_problem_t), intent(inout) :: this
     type(decomposition_t), intent(in) :: dec
     type(constraints_t), intent(inout) :: con
     type(coarse_layout_t), intent(in) :: layout
     type(MPI_Comm), intent(in) :: comm
     logical, intent(in), optional :: mask(:)
-    character(len=*), intent(in), optional :: placement
+    type(coarse_options_t), intent(in), optional :: options
+    type(coarse_options_t) :: opt
+    integer(ip), allocatable :: perm(:)
     real(dp), allocatable :: slots_own(:, :)
     integer(ip), allocatable :: irn(:), jcn(:)
     real(dp), allocatable :: a(:)
@@ -125,6 +167,8 @@ contains
     this%layout = layout
     this%n = 6*layout%nsub
     call MPI_Comm_rank(comm, rank, ierr)
+    if (present(options)) opt = options
+    call make_groups(this, opt%ranks_per_group)
 
     ! 1. the 6-blocks of every row, by copy slot, summed at the owner
     call owned_row_blocks(con, slots_own)
@@ -143,26 +187,34 @@ contains
       end do
     end do
 
-    ! 3. COO of the upper triangle, to MUMPS
+    ! 3. COO of the upper triangle, to one member of every group, to MUMPS
     call blocks%to_coo(irn, jcn, a)
+    blocks = block_hash_t()              ! released before the factorization
     this%nnz_local = size(a, kind=i8)
     this%rank = rank
-    this%redundant = .false.
-    if (present(placement)) this%redundant = placement == 'redundant'
-    if (this%redundant) then
-      call gather_everywhere(irn, jcn, a)
-      call this%mumps%init(MPI_COMM_SELF, .true.)
+    if (this%ngroups > 1) call send_to_groups(irn, jcn, a)
+    call this%mumps%init(this%group_comm, .true.)
+    if (this%group_size == 1) then
       call this%mumps%set_centralized(this%n, irn, jcn, a)
     else
-      call this%mumps%init(comm, .true.)
       call this%mumps%set_distributed(this%n, irn, jcn, a)
     end if
-    call this%mumps%set_ordering('metis', coarse_ordering(dec, layout))
+    deallocate (irn, jcn, a)
+    ! the pivot order: only the host of each group's instance reads it
+    if (this%group_rank == 0) then
+      perm = coarse_ordering(dec, layout)
+    else
+      allocate (perm(0))
+    end if
+    call this%mumps%set_ordering('metis', perm)
+    deallocate (perm)
+    if (opt%blr > 0) call this%mumps%set_low_rank(opt%blr)
+    if (opt%ooc) call this%mumps%set_out_of_core()
     t0 = MPI_Wtime()
     call this%mumps%factorize()
     this%seconds_factorization = MPI_Wtime() - t0
     this%factorized = .true.
-    if (rank == 0 .or. this%redundant) then
+    if (this%group_rank == 0) then
       allocate (this%rhs(this%n, 1))
     else
       allocate (this%rhs(1, 1))
@@ -170,30 +222,38 @@ contains
 
   contains
 
-    !> Every rank gets all ranks' COO entries.
-    subroutine gather_everywhere(irn, jcn, a)
+    !> Each rank's entries to one member of every group: in group g (ranks
+    !> first(g) .. first(g+1)-1) to first(g) + mod(rank, its size). A member
+    !> receives the entries of about c ranks' worth... of P / size ranks.
+    subroutine send_to_groups(irn, jcn, a)
       integer(ip), allocatable, intent(inout) :: irn(:), jcn(:)
       real(dp), allocatable, intent(inout) :: a(:)
-      integer, allocatable :: counts(:), displs(:)
-      integer(ip), allocatable :: all_i(:), all_j(:)
-      real(dp), allocatable :: all_a(:)
-      integer :: nranks, r, mine
+      integer, allocatable :: scounts(:), sdispls(:), rcounts(:), rdispls(:), first(:)
+      integer(ip), allocatable :: new_i(:), new_j(:)
+      real(dp), allocatable :: new_a(:)
+      integer :: nranks, g, r, dest
       call MPI_Comm_size(comm, nranks, ierr)
-      allocate (counts(nranks), displs(nranks))
-      mine = size(a)
-      call MPI_Allgather(mine, 1, MPI_INTEGER, counts, 1, MPI_INTEGER, comm, ierr)
-      displs(1) = 0
-      do r = 2, nranks
-        displs(r) = displs(r - 1) + counts(r - 1)
+      allocate (scounts(nranks), sdispls(nranks), rcounts(nranks), rdispls(nranks))
+      call group_starts(nranks, this%ngroups, first)
+      scounts = 0
+      sdispls = 0                      ! every destination reads the same entries
+      do g = 0, this%ngroups - 1
+        dest = first(g) + mod(rank, first(g + 1) - first(g))
+        scounts(dest + 1) = size(a)
       end do
-      allocate (all_i(sum(counts)), all_j(sum(counts)), all_a(sum(counts)))
-      call MPI_Allgatherv(irn, mine, MPI_INT_IP, all_i, counts, displs, MPI_INT_IP, comm, ierr)
-      call MPI_Allgatherv(jcn, mine, MPI_INT_IP, all_j, counts, displs, MPI_INT_IP, comm, ierr)
-      call MPI_Allgatherv(a, mine, MPI_REAL_DP, all_a, counts, displs, MPI_REAL_DP, comm, ierr)
-      call move_alloc(all_i, irn)
-      call move_alloc(all_j, jcn)
-      call move_alloc(all_a, a)
-    end subroutine gather_everywhere
+      call MPI_Alltoall(scounts, 1, MPI_INTEGER, rcounts, 1, MPI_INTEGER, comm, ierr)
+      rdispls(1) = 0
+      do r = 2, nranks
+        rdispls(r) = rdispls(r - 1) + rcounts(r - 1)
+      end do
+      allocate (new_i(sum(rcounts)), new_j(sum(rcounts)), new_a(sum(rcounts)))
+      call MPI_Alltoallv(irn, scounts, sdispls, MPI_INT_IP, new_i, rcounts, rdispls, MPI_INT_IP, comm, ierr)
+      call MPI_Alltoallv(jcn, scounts, sdispls, MPI_INT_IP, new_j, rcounts, rdispls, MPI_INT_IP, comm, ierr)
+      call MPI_Alltoallv(a, scounts, sdispls, MPI_REAL_DP, new_a, rcounts, rdispls, MPI_REAL_DP, comm, ierr)
+      call move_alloc(new_i, irn)
+      call move_alloc(new_j, jcn)
+      call move_alloc(new_a, a)
+    end subroutine send_to_groups
 
     !> block(ps, pt) += u v^T, kept as an upper-triangular block pair
     subroutine add_product(ps, pt, u, v)
@@ -293,26 +353,136 @@ contains
   end function coarse_ordering
 
   !> x = (G G^T)^{-1} b for local coarse blocks b (6*nlocal); x may alias b's
-  !> storage only through separate actual arguments. Collective.
+  !> storage only through separate actual arguments. Collective: gather to the
+  !> group's first rank, exchange among the first ranks, solve on the group,
+  !> scatter inside the group.
   subroutine solve(this, b, x)
     class(coarse_problem_t), intent(inout) :: this
     real(dp), intent(in) :: b(:)
     real(dp), intent(out) :: x(:)
-    integer :: ierr, first
-    if (this%redundant) then
-      call MPI_Allgatherv(b, 6*this%layout%nlocal, MPI_REAL_DP, this%rhs, this%layout%counts, &
-                          this%layout%displs, MPI_REAL_DP, this%comm, ierr)
-      call this%mumps%solve(this%rhs)
-      first = this%layout%displs(this%rank + 1)
-      x(1:6*this%layout%nlocal) = this%rhs(first + 1:first + 6*this%layout%nlocal, 1)
+    integer :: ierr, nmine, lo, hi
+    nmine = 6*this%layout%nlocal
+    lo = this%group_offset + 1
+    hi = this%group_offset + this%group_length
+    if (this%group_size == 1) then
+      this%rhs(lo:lo + nmine - 1, 1) = b(1:nmine)
+    else if (this%group_rank == 0) then
+      call MPI_Gatherv(b, nmine, MPI_REAL_DP, this%rhs(lo:hi, 1), this%gcounts, this%gdispls, MPI_REAL_DP, 0, &
+                       this%group_comm, ierr)
     else
-      call MPI_Gatherv(b, 6*this%layout%nlocal, MPI_REAL_DP, this%rhs, this%layout%counts, &
-                       this%layout%displs, MPI_REAL_DP, 0, this%comm, ierr)
-      call this%mumps%solve(this%rhs)
-      call MPI_Scatterv(this%rhs, this%layout%counts, this%layout%displs, MPI_REAL_DP, x, &
-                        6*this%layout%nlocal, MPI_REAL_DP, 0, this%comm, ierr)
+      call MPI_Gatherv(b, nmine, MPI_REAL_DP, this%rhs, this%gcounts, this%gdispls, MPI_REAL_DP, 0, &
+                       this%group_comm, ierr)
+    end if
+    if (this%group_rank == 0 .and. this%ngroups > 1) &
+      call MPI_Allgatherv(MPI_IN_PLACE, 0, MPI_REAL_DP, this%rhs, this%rcounts, this%rdispls, MPI_REAL_DP, &
+                          this%roots_comm, ierr)
+    call this%mumps%solve(this%rhs)
+    if (this%group_size == 1) then
+      x(1:nmine) = this%rhs(lo:lo + nmine - 1, 1)
+    else if (this%group_rank == 0) then
+      call MPI_Scatterv(this%rhs(lo:hi, 1), this%gcounts, this%gdispls, MPI_REAL_DP, x, nmine, MPI_REAL_DP, 0, &
+                        this%group_comm, ierr)
+    else
+      call MPI_Scatterv(this%rhs, this%gcounts, this%gdispls, MPI_REAL_DP, x, nmine, MPI_REAL_DP, 0, &
+                        this%group_comm, ierr)
     end if
   end subroutine solve
+
+  !> First rank of each group, first(0:ngroups), first(ngroups) = nranks:
+  !> group g holds ranks first(g) .. first(g+1)-1, first(g) = ceil(g P /
+  !> ngroups), so that rank r is in group floor(r ngroups / P) and the sizes
+  !> differ by one at most.
+  pure subroutine group_starts(nranks, ngroups, first)
+    integer, intent(in) :: nranks, ngroups
+    integer, allocatable, intent(out) :: first(:)
+    integer :: g
+    allocate (first(0:ngroups))
+    do g = 0, ngroups
+      first(g) = int((int(g, i8)*nranks + ngroups - 1)/ngroups)
+    end do
+  end subroutine group_starts
+
+  !> Estimated bytes of the MUMPS factors of G G^T for `nsub` subdomains
+  !> (one group's factorization, in all): nested dissection of an n^3 grid of
+  !> 6x6 blocks gives O(nsub^(4/3)) factor entries. The constant is fitted to
+  !> the measured box cubes (docs/RESULTS.md, "Coarse problem on rank
+  !> groups"): 8 bytes per entry.
+  pure integer(i8) function estimated_factor_bytes(nsub)
+    integer(ip), intent(in) :: nsub
+    real(dp), parameter :: entries_per_nsub43 = 400.0_dp
+    estimated_factor_bytes = int(8*entries_per_nsub43*real(nsub, dp)**(4.0_dp/3.0_dp), i8)
+  end function estimated_factor_bytes
+
+  !> Ranks per coarse group from &solver coarse_ranks and coarse_placement on
+  !> `nranks` ranks with `nsub` subdomains: 'redundant' 1, 'distributed' all
+  !> ranks, coarse_ranks > 0 itself, else (auto) the fewest ranks that keep the
+  !> estimated factor below coarse_bytes_per_rank per rank, at least 1 and at
+  !> most nranks. `msg` is not empty when the value cannot be used.
+  subroutine choose_coarse_ranks(coarse_ranks, placement, nranks, nsub, c, msg)
+    integer(ip), intent(in) :: coarse_ranks
+    character(len=*), intent(in) :: placement
+    integer, intent(in) :: nranks
+    integer(ip), intent(in) :: nsub
+    integer, intent(out) :: c
+    character(len=*), intent(out) :: msg
+    msg = ''
+    select case (placement)
+    case ('redundant')
+      c = 1
+    case ('distributed')
+      c = nranks
+    case default
+      if (coarse_ranks > nranks) then
+        write (msg, '(a,i0,a,i0,a,i0,a)') 'group &solver, variable coarse_ranks: ', coarse_ranks, &
+          ' ranks per coarse group, more than the ', nranks, ' MPI ranks; give 1 to ', nranks, &
+          ' (or 0: chosen from the coarse dimension)'
+        c = nranks
+      else if (coarse_ranks < 0) then
+        write (msg, '(a,i0,a)') 'group &solver, variable coarse_ranks: ', coarse_ranks, ' must be >= 0'
+        c = 1
+      else if (coarse_ranks > 0) then
+        c = int(coarse_ranks)
+      else
+        c = int(min(int(nranks, i8), max(1_i8, &
+                (estimated_factor_bytes(nsub) + coarse_bytes_per_rank - 1)/coarse_bytes_per_rank)))
+      end if
+    end select
+  end subroutine choose_coarse_ranks
+
+  !> The group communicators for `c` ranks per group (c <= 0 or c >= P: one
+  !> group). Collective over this%comm.
+  subroutine make_groups(this, c)
+    class(coarse_problem_t), intent(inout) :: this
+    integer, intent(in) :: c
+    integer :: nranks, rank, ierr, color, g, first_member
+    integer, allocatable :: first(:)
+    call MPI_Comm_size(this%comm, nranks, ierr)
+    call MPI_Comm_rank(this%comm, rank, ierr)
+    if (c <= 0 .or. c >= nranks) then
+      this%ngroups = 1
+    else
+      this%ngroups = nranks/c
+    end if
+    call group_starts(nranks, this%ngroups, first)
+    this%group = int((int(rank, i8)*this%ngroups)/nranks)
+    call MPI_Comm_split(this%comm, this%group, rank, this%group_comm, ierr)
+    call MPI_Comm_rank(this%group_comm, this%group_rank, ierr)
+    call MPI_Comm_size(this%group_comm, this%group_size, ierr)
+    color = MPI_UNDEFINED
+    if (this%group_rank == 0) color = 0
+    call MPI_Comm_split(this%comm, color, rank, this%roots_comm, ierr)
+    this%have_comms = .true.
+    first_member = first(this%group)
+    this%group_offset = this%layout%displs(first_member + 1)
+    this%gcounts = this%layout%counts(first_member + 1:first(this%group + 1))
+    this%gdispls = this%layout%displs(first_member + 1:first(this%group + 1)) - this%group_offset
+    this%group_length = sum(this%gcounts)
+    allocate (this%rcounts(this%ngroups), this%rdispls(this%ngroups))
+    do g = 0, this%ngroups - 1
+      this%rdispls(g + 1) = this%layout%displs(first(g) + 1)
+      this%rcounts(g + 1) = sum(this%layout%counts(first(g) + 1:first(g + 1)))
+    end do
+  end subroutine make_groups
 
   !> Seconds of the MUMPS analysis and factorization in `init`.
   real(dp) function factorization_seconds(this)
@@ -320,11 +490,55 @@ contains
     factorization_seconds = this%seconds_factorization
   end function factorization_seconds
 
+  !> Ranks in this rank's group (the size of its MUMPS communicator).
+  integer function ranks_per_group(this)
+    class(coarse_problem_t), intent(in) :: this
+    ranks_per_group = this%group_size
+  end function ranks_per_group
+
+  !> Number of groups (factorizations of G G^T).
+  integer function groups(this)
+    class(coarse_problem_t), intent(in) :: this
+    groups = this%ngroups
+  end function groups
+
+  !> Entries of this group's factors (full rank), summed over its ranks.
+  integer(i8) function factor_entries(this)
+    class(coarse_problem_t), intent(in) :: this
+    factor_entries = this%mumps%factor_entries()
+  end function factor_entries
+
+  !> Entries of this group's factors after BLR compression.
+  integer(i8) function factor_entries_effective(this)
+    class(coarse_problem_t), intent(in) :: this
+    factor_entries_effective = this%mumps%factor_entries_effective()
+  end function factor_entries_effective
+
+  !> MB MUMPS used in the factorization: the most on one rank of the group,
+  !> the sum over the group.
+  function mumps_memory_mb(this) result(mb)
+    class(coarse_problem_t), intent(in) :: this
+    integer(i8) :: mb(2)
+    mb = this%mumps%memory_mb()
+  end function mumps_memory_mb
+
   subroutine free(this)
     class(coarse_problem_t), intent(inout) :: this
+    integer :: ierr
     if (this%factorized) call this%mumps%free()
     this%factorized = .false.
     if (allocated(this%rhs)) deallocate (this%rhs)
+    if (this%have_comms) then
+      ! after MUMPS's JOB = -2: MUMPS uses the group communicator until then
+      call MPI_Comm_free(this%group_comm, ierr)
+      if (this%roots_comm /= MPI_COMM_NULL) call MPI_Comm_free(this%roots_comm, ierr)
+      this%have_comms = .false.
+    end if
+    if (allocated(this%gcounts)) deallocate (this%gcounts, this%gdispls)
+    if (allocated(this%rcounts)) deallocate (this%rcounts, this%rdispls)
+    this%ngroups = 1
+    this%group_size = 1
+    this%group_rank = 0
   end subroutine free
 
 end module coarse_problem

@@ -5,10 +5,13 @@
 !> (G G^T, projector) and 'dual setup' (d, e, lambda~, ||P F P||).
 submodule(feti_operators) feti_builder
   use timers, only: timer_start, timer_stop
-  use kinds, only: MPI_INT_I8
+  use kinds, only: MPI_INT_I8, MPI_REAL_DP
   use decomposition, only: build_decomposition
   use subdomain, only: build_subdomain
   use assembly, only: assemble_subdomain
+  use coarse_problem, only: choose_coarse_ranks
+  use mpi_f08, only: MPI_Comm_size, MPI_IN_PLACE
+  use errors, only: collective_error, exit_input_error
   implicit none
 
 contains
@@ -23,6 +26,7 @@ contains
 
     call this%free()
     this%communicator = comm
+    call check_coarse_ranks()
 
     call timer_start('mesh')
     call build_decomposition(p, comm, this%dec)
@@ -52,7 +56,7 @@ contains
     call timer_stop('B and G')
 
     call timer_start('coarse setup')
-    call this%proj%init(this%dec, this%b, comm, p%solver%coarse_placement)
+    call this%proj%init(this%dec, this%b, comm, p%solver)
     call timer_stop('coarse setup')
 
     call timer_start('dual setup')
@@ -69,9 +73,24 @@ contains
       this%d = this%d - this%b%gap_rhs()
       ! lambda~ = G^T (G G^T)^{-1} e
       block
-        real(dp) :: z(6*this%n_local_subs)
+        real(dp) :: z(6*this%n_local_subs), sums(2)
+        character(len=120) :: line
         call this%proj%solve(this%e, z)
         call this%b%apply_gt(z, this%lambda_tilde)
+        ! the coarse solve's accuracy as the run sees it (inexact with &solver coarse_blr):
+        ! G P x = 0 for a keyed random x, relative to G x
+        block
+          real(dp), allocatable :: x(:), px(:)
+          real(dp) :: gx(6*this%n_local_subs)
+          allocate (x(this%b%n_own()), px(this%b%n_own()))
+          call this%keyed_random(11, x)
+          call this%proj%project(this%b, x, px, gx=gx)
+          call this%b%apply_g(px, z)
+          sums = [sum(z**2), sum(gx**2)]
+        end block
+        call MPI_Allreduce(MPI_IN_PLACE, sums, 2, MPI_REAL_DP, MPI_SUM, comm, ierr)
+        write (line, '(a,es10.3)') 'coarse check: ||G P x|| / ||G x|| =', sqrt(sums(1)/max(sums(2), tiny(1.0_dp)))
+        call log_message(line)
       end block
       this%contact = this%b%is_contact()
       this%lower = -huge(1.0_dp)
@@ -79,6 +98,19 @@ contains
     end associate
     call estimate_norm_pfp(this, p%solver%power_iterations)
     call timer_stop('dual setup')
+
+  contains
+
+    !> &solver coarse_ranks against the number of ranks, before any set-up
+    !> work (the projector applies the same rule). Collective.
+    subroutine check_coarse_ranks()
+      integer :: nranks, c
+      character(len=300) :: msg
+      call MPI_Comm_size(comm, nranks, ierr)
+      call choose_coarse_ranks(p%solver%coarse_ranks, p%solver%coarse_placement, nranks, &
+                               int(product(int(p%mesh%nsub, i8)), ip), c, msg)
+      if (len_trim(msg) > 0) call collective_error(msg, comm, exit_input_error)
+    end subroutine check_coarse_ranks
   end subroutine setup
 
   !> ||P F P|| by the power method on Im P, from a keyed random start. It

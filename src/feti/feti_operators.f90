@@ -99,6 +99,7 @@ module feti_operators
     procedure :: norm_pfp
     procedure :: f_applications
     procedure :: coarse_solves
+    procedure :: coarse_factor
     procedure :: free
   end type feti_t
 
@@ -430,6 +431,13 @@ contains
     class(feti_t), intent(in) :: this
     coarse_solves = this%proj%n_solves()
   end function coarse_solves
+
+  !> The factorized G G^T of the projector (groups, sizes, memory).
+  function coarse_factor(this) result(cp)
+    class(feti_t), intent(in), target :: this
+    type(coarse_problem_t), pointer :: cp
+    cp => this%proj%coarse_problem()
+  end function coarse_factor
 
   subroutine free(this)
     class(feti_t), intent(inout) :: this

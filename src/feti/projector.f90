@@ -1,6 +1,6 @@
 !> The coarse problem of TFETI and the projector built on it: (G G^T)^{-1}
-!> (coarse_problem, MUMPS, redundant or distributed by `&solver
-!> coarse_placement`) and P = I - G^T (G G^T)^{-1} G. G is applied through
+!> (coarse_problem, MUMPS on groups of `&solver coarse_ranks` ranks) and
+!> P = I - G^T (G G^T)^{-1} G. G is applied through
 !> the B operator that holds its entries (b_operator), which is passed in.
 !> Timer 'coarse solve'.
 module projector
@@ -8,10 +8,14 @@ module projector
   use timers, only: timer_start, timer_stop
   use decomposition, only: decomposition_t
   use constraints, only: constraints_t
-  use coarse_problem, only: coarse_problem_t, coarse_layout_t, build_coarse_layout
+  use coarse_problem, only: coarse_problem_t, coarse_layout_t, build_coarse_layout, coarse_options_t, &
+                            choose_coarse_ranks
+  use params, only: solver_params_t
+  use errors, only: collective_error, exit_input_error
+  use logger, only: log_message
   use orthonormal_coarse, only: orthonormal_coarse_t
   use b_operator, only: b_operator_t
-  use mpi_f08, only: MPI_Comm
+  use mpi_f08, only: MPI_Comm, MPI_Comm_size
   implicit none
   private
 
@@ -20,6 +24,7 @@ module projector
     type(MPI_Comm) :: comm
     type(coarse_layout_t) :: layout                  !< where each subdomain's 6-block goes
     type(coarse_problem_t) :: coarse                 !< (G G^T)^{-1}
+    type(coarse_options_t) :: options                !< rank groups, BLR, out-of-core (also for G_A G_A^T)
     real(dp), allocatable :: cwork(:), cwork2(:)     !< work: local coarse blocks
     integer(i8) :: solves = 0
   contains
@@ -29,25 +34,43 @@ module projector
     procedure :: init_active_coarse
     procedure :: init_orthonormal
     procedure :: n_solves
+    procedure :: coarse_problem
     procedure :: free
   end type projector_t
 
 contains
 
   !> Assemble and factorize G G^T for the subdomains of `dec` and the B (and
-  !> G) of `b`, with `placement` 'redundant' or 'distributed'. Collective.
-  subroutine init(this, dec, b, comm, placement)
+  !> G) of `b`, on the rank groups `s` asks for (coarse_ranks,
+  !> coarse_placement; BLR and out-of-core by coarse_blr, coarse_ooc). A
+  !> value that cannot be used on this many ranks stops every rank with an
+  !> input error. Collective.
+  subroutine init(this, dec, b, comm, s)
     class(projector_t), intent(inout) :: this
     type(decomposition_t), intent(in) :: dec
     type(b_operator_t), intent(inout), target :: b
     type(MPI_Comm), intent(in) :: comm
-    character(len=*), intent(in) :: placement
+    type(solver_params_t), intent(in) :: s
     type(constraints_t), pointer :: con
+    integer :: nranks, ierr, c
+    character(len=300) :: msg
     call this%free()
     this%comm = comm
+    call MPI_Comm_size(comm, nranks, ierr)
+    call choose_coarse_ranks(s%coarse_ranks, s%coarse_placement, nranks, dec%nsubdomains, c, msg)
+    if (len_trim(msg) > 0) call collective_error(msg, comm, exit_input_error)
+    this%options = coarse_options_t(c, s%coarse_blr, s%coarse_ooc)
     con => b%constraints()
     call build_coarse_layout(dec, comm, this%layout)
-    call this%coarse%init(dec, con, this%layout, comm, placement=placement)
+    call this%coarse%init(dec, con, this%layout, comm, options=this%options)
+    associate (mb => this%coarse%mumps_memory_mb())
+      write (msg, '(a,i0,a,i0,a,i0,a,es9.2,a,l1,a,i0,a,i0,a,i0,a,i0,a)') 'coarse problem: dimension ', &
+        6*dec%nsubdomains, ', ', this%coarse%groups(), ' group(s) of ', this%coarse%ranks_per_group(), &
+        ' rank(s) (BLR ', s%coarse_blr, ', out-of-core ', s%coarse_ooc, '); factor entries ', &
+        this%coarse%factor_entries(), ' (after BLR ', this%coarse%factor_entries_effective(), &
+        '), MUMPS factorization memory ', mb(1), ' MB max per rank, ', mb(2), ' MB per group'
+    end associate
+    call log_message(msg)
     allocate (this%cwork(6*this%layout%nlocal), this%cwork2(6*this%layout%nlocal))
   end subroutine init
 
@@ -88,7 +111,7 @@ contains
     logical, intent(in) :: mask(:)
     type(constraints_t), pointer :: con
     con => b%constraints()
-    call cp%init(dec, con, this%layout, this%comm, mask)
+    call cp%init(dec, con, this%layout, this%comm, mask, this%options)
   end subroutine init_active_coarse
 
   !> The explicit G~ = L^{-1} G of `&solver coarse = 'cholesky'`. Collective.
@@ -106,6 +129,13 @@ contains
     class(projector_t), intent(in) :: this
     n_solves = this%solves
   end function n_solves
+
+  !> The factorized G G^T (sizes, groups, memory for the report).
+  function coarse_problem(this) result(cp)
+    class(projector_t), intent(in), target :: this
+    type(coarse_problem_t), pointer :: cp
+    cp => this%coarse
+  end function coarse_problem
 
   subroutine free(this)
     class(projector_t), intent(inout) :: this

@@ -72,7 +72,11 @@ module params
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
     character(len=name_len) :: local_solver = 'block'    !< 'block' | 'subdomain'
-    character(len=name_len) :: coarse_placement = 'redundant'  !< 'redundant' | 'distributed'
+    !> 'auto' (coarse_ranks decides) | 'redundant' (= coarse_ranks 1) | 'distributed' (= all ranks)
+    character(len=name_len) :: coarse_placement = 'auto'
+    integer(ip) :: coarse_ranks = 0           !< ranks per coarse group (0: chosen from the coarse dimension)
+    real(dp) :: coarse_blr = 0                !< MUMPS BLR dropping tolerance for G G^T (0: full rank)
+    logical :: coarse_ooc = .false.           !< MUMPS out-of-core factors of G G^T
     real(dp) :: regularization = 1            !< rho_f relative to the mean diagonal of K
     character(len=name_len) :: scaling = 'young'  !< rows of B weighted by Young's moduli: 'young' | 'none'
     !> SMALBE's stopping test: 'violation' (largest constraint violation in
@@ -457,16 +461,16 @@ contains
     character(len=*), intent(in), optional :: group_text
     character(len=*), intent(out), optional :: written(:)
     logical :: reading
-    integer(ip) :: nsub(3), nel(3), distortion_seed, seed, max_outer, max_hessian, power_iterations
+    integer(ip) :: nsub(3), nel(3), distortion_seed, seed, max_outer, max_hessian, power_iterations, coarse_ranks
     real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, rho_growth, &
-                rho_contraction, &
+                rho_contraction, coarse_blr, &
                 regularization, active_tol, kkt_tol
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
                                m_no_step, preconditioner
     character(len=path_len) :: directory
-    logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report
+    logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report, coarse_ooc
     namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping
     namelist /material/ young, poisson, variation, contrast, seed
     namelist /load/ top_pressure
@@ -474,7 +478,7 @@ contains
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
       m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, power_iterations, coarse, &
-      coarse_placement, local_ordering, local_solver, &
+      coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
       regularization, scaling, stopping, preconditioner, monitor
     namelist /reconstruction/ method, active_tol, kkt_tol
     character(len=name_len) :: run_name
@@ -517,7 +521,8 @@ contains
         rho_growth = s%rho_growth; rho_contraction = s%rho_contraction
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
-        coarse_placement = s%coarse_placement
+        coarse_placement = s%coarse_placement; coarse_ranks = s%coarse_ranks
+        coarse_blr = s%coarse_blr; coarse_ooc = s%coarse_ooc
         regularization = s%regularization; scaling = s%scaling; stopping = s%stopping; monitor = s%monitor
         preconditioner = s%preconditioner
       end associate
@@ -553,6 +558,7 @@ contains
                                  rho_contraction, power_iterations, &
                                  lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(coarse_placement), &
+                                 coarse_ranks, coarse_blr, coarse_ooc, &
                                  regularization, lower(scaling), lower(stopping), lower(preconditioner), &
                                  monitor)
     case ('reconstruction')
@@ -628,8 +634,16 @@ contains
         call fail('solver', 'coarse', "must be 'mumps' or 'cholesky'", s%coarse)
       if (.not. one_of(s%local_ordering, [character(len=8) :: 'amd', 'metis'])) &
         call fail('solver', 'local_ordering', "must be 'amd' or 'metis'", s%local_ordering)
-      if (.not. one_of(s%coarse_placement, [character(len=12) :: 'redundant', 'distributed'])) &
-        call fail('solver', 'coarse_placement', "must be 'redundant' or 'distributed'", s%coarse_placement)
+      if (.not. one_of(s%coarse_placement, [character(len=12) :: 'auto', 'redundant', 'distributed'])) &
+        call fail('solver', 'coarse_placement', "must be 'auto', 'redundant' or 'distributed'", s%coarse_placement)
+      if (s%coarse_ranks < 0) &
+        call fail('solver', 'coarse_ranks', 'must be >= 0 (0: chosen from the coarse dimension and the ranks)', &
+                  ints([s%coarse_ranks]))
+      if (s%coarse_ranks > 0 .and. s%coarse_placement /= 'auto') &
+        call fail('solver', 'coarse_ranks', "give coarse_ranks or coarse_placement ('redundant' = 1, "// &
+                  "'distributed' = all ranks), not both", ints([s%coarse_ranks])//', '//trim(s%coarse_placement))
+      if (.not. (s%coarse_blr >= 0 .and. s%coarse_blr < 1)) &
+        call fail('solver', 'coarse_blr', 'must be in [0, 1) (0: full-rank factors)', reals([s%coarse_blr]))
       if (.not. one_of(s%local_solver, [character(len=10) :: 'block', 'subdomain'])) &
         call fail('solver', 'local_solver', "must be 'block' or 'subdomain'", s%local_solver)
       if (s%regularization <= 0) &

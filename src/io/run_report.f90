@@ -8,6 +8,7 @@ module run_report
   use logger, only: log_message
   use params, only: params_t
   use feti_operators, only: feti_t, feti_sizes_t
+  use coarse_problem, only: coarse_problem_t
   use qp_problem, only: qp_status_name
   use smalbe, only: smalbe_t
   use tfeti_dualization, only: tfeti_dualization_t, dual_solution_t
@@ -36,6 +37,7 @@ contains
     real(dp), intent(in) :: seconds(3)
     type(json_writer_t) :: js
     type(feti_t), pointer :: op
+    type(coarse_problem_t), pointer :: cp
     type(feti_sizes_t) :: n
     character(len=:), allocatable :: memory
     integer(i8) :: f_bytes
@@ -117,6 +119,16 @@ contains
     call js%add('contact_radius', contact%contact_radius)
     call js%end_object()
     call js%add_raw('memory', memory)
+    cp => op%coarse_factor()
+    block
+      call js%begin_object('coarse')
+      call js%add_each([character(len=32) :: 'ranks_per_group', 'groups', 'factor_entries', &
+                        'factor_entries_effective', 'mumps_memory_mb_max_rank', 'mumps_memory_mb_group'], &
+                       [int(cp%ranks_per_group(), i8), int(cp%groups(), i8), cp%factor_entries(), &
+                        cp%factor_entries_effective(), cp%mumps_memory_mb()])
+      call js%add('factorization_seconds', cp%factorization_seconds())
+      call js%end_object()
+    end block
     associate (b => blas_in_use())                 ! set up by the main program
       call js%add_raw('blas', blas_json(trim(b%library), trim(b%path), b%threads, trim(b%source), b%settable))
     end associate

@@ -1,5 +1,7 @@
 !> Decomposition of the global box mesh into subdomains and the map of
-!> subdomains to MPI ranks. Everything here is replicated on every rank.
+!> subdomains to MPI ranks. Arrays over subdomains (subdomain_rank, element
+!> counts, the subdomain graph) are replicated on every rank; nothing of the
+!> size of the global mesh is kept after the set-up.
 !>
 !> 'box': box subdomains (I,J,K) of nel elements, id 1 + I + Nx*(J + Ny*K).
 !> Nothing of the size of the global mesh is stored: the subdomain of an
@@ -11,9 +13,14 @@
 !> face-connected is split into its face-connected components, each one a
 !> subdomain; empty parts are dropped. Ids are 1..N ordered by (METIS part,
 !> smallest element gid of the component).
-!> For now a METIS decomposition keeps element_subdomain(ne) and the element
-!> lists subdomain_element_ptr/subdomain_elements(ne) on every rank (8 bytes
-!> per global element per rank; issue 17, item 1, METIS part still open).
+!> The partition is made on rank 0 from the whole mesh (METIS's dual graph,
+!> the part of every element: arrays of the global element count, on rank 0
+!> during build_decomposition only). Rank 0 then sends every rank the
+!> elements it needs and their subdomains: the elements of its subdomains and
+!> every element sharing a node with them (`known_gids`, `known_subdomain`), so
+!> that node_subdomain_list answers for every node of its subdomains; the
+!> element lists of its own subdomains follow. The subdomain graph and the
+!> element count of every subdomain are broadcast (arrays over subdomains).
 !> Mapping 'block': contiguous blocks of ids, sizes differing by at most one;
 !> 'metis': METIS_PartGraphKway on the subdomain adjacency graph (subdomains
 !> sharing a node), vertex weights = element counts; a rank METIS leaves empty
@@ -26,7 +33,7 @@ module decomposition
   use metis_wrapper, only: metis_part_mesh_dual, metis_part_graph_kway
   use sorting, only: sort_ints, append_unmarked
   use box_mesh, only: box_mesh_t, box_mesh_init
-  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast
+  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast, MPI_Scatter, MPI_Scatterv, MPI_INTEGER
   implicit none
   private
 
@@ -38,12 +45,18 @@ module decomposition
     type(MPI_Comm) :: comm                              !< the ranks that share the subdomains
     character(len=name_len) :: method = 'box'           !< 'box' | 'metis'
     integer(ip) :: nsubdomains = 0, nranks = 1, rank = 0
-    !> element gid -> subdomain id; 'metis' only (box: subdomain_of_element)
-    integer(ip), allocatable :: element_subdomain(:)
+    !> 'metis' only: the elements this rank knows (its subdomains' elements
+    !> and every element sharing a node with them), ascending gids, and their
+    !> subdomain ids (box: subdomain_of_element by index arithmetic)
+    integer(ip), allocatable :: known_gids(:), known_subdomain(:)
+    !> 'metis' only: element count of every subdomain id, and the subdomain
+    !> graph (CSR, as subdomain_graph returns it)
+    integer(ip), allocatable :: subdomain_nelem(:), graph_xadj(:), graph_adjncy(:)
     integer(ip), allocatable :: subdomain_rank(:)       !< subdomain id -> owning rank (0-based)
     integer(ip), allocatable :: local_subdomains(:)     !< ids owned by this rank, ascending
-    !> 'metis' only (box: subdomain_element_gids): elements of subdomain s:
-    !> subdomain_elements(subdomain_element_ptr(s):subdomain_element_ptr(s+1)-1), ascending gids
+    !> 'metis' only (box: subdomain_element_gids): elements of the k-th local
+    !> subdomain (local_subdomains(k)):
+    !> subdomain_elements(subdomain_element_ptr(k):subdomain_element_ptr(k+1)-1), ascending gids
     integer(ip), allocatable :: subdomain_element_ptr(:), subdomain_elements(:)
   contains
     procedure :: is_box
@@ -63,7 +76,8 @@ contains
     type(MPI_Comm), intent(in) :: comm
     type(decomposition_t), intent(out) :: dec
     integer :: ierr, rank, nranks
-    integer(ip) :: ne, s
+    integer(ip) :: ne, s, nadj
+    integer(ip), allocatable :: esub(:)
     character(len=256) :: msg
 
     call MPI_Comm_rank(comm, rank, ierr)
@@ -81,11 +95,21 @@ contains
       ! index arithmetic only: no array of the size of the mesh
       dec%nsubdomains = product(p%mesh%nsub)
     case ('metis')
-      allocate (dec%element_subdomain(ne))
-      if (rank == 0) call metis_partition(dec%mesh, dec%element_subdomain, dec%nsubdomains)
+      ! rank 0: the partition of the whole mesh, the element counts and the graph
+      if (rank == 0) then
+        allocate (esub(ne))
+        call metis_partition(dec%mesh, esub, dec%nsubdomains)
+        call element_graph(dec%mesh, esub, dec%nsubdomains, dec%subdomain_nelem, dec%graph_xadj, &
+                           dec%graph_adjncy)
+        nadj = size(dec%graph_adjncy, kind=ip)
+      end if
       call MPI_Bcast(dec%nsubdomains, 1, MPI_INT_IP, 0, comm, ierr)
-      call MPI_Bcast(dec%element_subdomain, ne, MPI_INT_IP, 0, comm, ierr)
-      call element_lists(dec)
+      call MPI_Bcast(nadj, 1, MPI_INT_IP, 0, comm, ierr)
+      if (rank /= 0) allocate (dec%subdomain_nelem(dec%nsubdomains), dec%graph_xadj(dec%nsubdomains + 1), &
+                               dec%graph_adjncy(nadj))
+      call MPI_Bcast(dec%subdomain_nelem, dec%nsubdomains, MPI_INT_IP, 0, comm, ierr)
+      call MPI_Bcast(dec%graph_xadj, dec%nsubdomains + 1, MPI_INT_IP, 0, comm, ierr)
+      call MPI_Bcast(dec%graph_adjncy, nadj, MPI_INT_IP, 0, comm, ierr)
     case default
       call collective_error("group &mesh, variable decomposition: must be 'box' or 'metis' (got "// &
                             trim(p%mesh%decomposition)//')', comm, exit_input_error)
@@ -111,7 +135,121 @@ contains
                             trim(p%mesh%mapping)//')', comm, exit_input_error)
     end select
     dec%local_subdomains = pack([(s, s=1, dec%nsubdomains)], dec%subdomain_rank == rank)
+    if (.not. dec%is_box()) call distribute_elements(dec, esub)
   end subroutine build_decomposition
+
+  !> Rank 0 sends every rank the elements it needs (see the module
+  !> documentation) with their subdomains, then frees the global `esub`; each
+  !> rank builds the element lists of its own subdomains. Collective.
+  subroutine distribute_elements(dec, esub)
+    type(decomposition_t), intent(inout) :: dec
+    integer(ip), allocatable, intent(inout) :: esub(:)   !< rank 0: subdomain of every element
+    integer, allocatable :: counts(:), displs(:), next(:)
+    integer(ip), allocatable :: sendbuf(:, :), recvbuf(:, :)
+    integer(ip) :: ne, e, k, nr, ranks(27), ls, s
+    integer :: mine, ierr, r
+
+    allocate (counts(0:dec%nranks - 1), displs(0:dec%nranks - 1))
+    if (dec%rank == 0) then
+      ne = size(esub, kind=ip)
+      counts = 0
+      do e = 1, ne
+        call ranks_needing(e, ranks, nr)
+        counts(ranks(1:nr)) = counts(ranks(1:nr)) + 1
+      end do
+      displs(0) = 0
+      do r = 1, dec%nranks - 1
+        displs(r) = displs(r - 1) + counts(r - 1)
+      end do
+      allocate (sendbuf(2, sum(counts)))
+      next = displs
+      do e = 1, ne
+        call ranks_needing(e, ranks, nr)
+        do k = 1, nr
+          next(ranks(k)) = next(ranks(k)) + 1
+          sendbuf(:, next(ranks(k))) = [e, esub(e)]
+        end do
+      end do
+      deallocate (esub)
+    else
+      allocate (sendbuf(2, 1))
+    end if
+    call MPI_Scatter(counts, 1, MPI_INTEGER, mine, 1, MPI_INTEGER, 0, dec%comm, ierr)
+    allocate (recvbuf(2, mine))
+    call MPI_Scatterv(sendbuf, 2*counts, 2*displs, MPI_INT_IP, recvbuf, 2*mine, MPI_INT_IP, 0, dec%comm, ierr)
+    deallocate (sendbuf)
+    dec%known_gids = recvbuf(1, :)            ! ascending: rank 0 sent them in gid order
+    dec%known_subdomain = recvbuf(2, :)
+    deallocate (recvbuf)
+
+    ! the element lists of the local subdomains
+    associate (nl => size(dec%local_subdomains))
+      allocate (dec%subdomain_element_ptr(nl + 1))
+      dec%subdomain_element_ptr(1) = 1
+      do ls = 1, nl
+        dec%subdomain_element_ptr(ls + 1) = dec%subdomain_element_ptr(ls) + &
+                                            dec%subdomain_nelem(dec%local_subdomains(ls))
+      end do
+      allocate (dec%subdomain_elements(dec%subdomain_element_ptr(nl + 1) - 1))
+      if (allocated(next)) deallocate (next)
+      allocate (next(nl))
+      next = dec%subdomain_element_ptr(1:nl)
+      do k = 1, size(dec%known_gids)
+        s = dec%known_subdomain(k)
+        if (dec%subdomain_rank(s) /= dec%rank) cycle
+        ls = local_position(dec, s)
+        dec%subdomain_elements(next(ls)) = dec%known_gids(k)
+        next(ls) = next(ls) + 1
+      end do
+      if (any(next /= dec%subdomain_element_ptr(2:nl + 1))) &
+        call fatal_error('decomposition: the elements received do not match the element counts')
+    end associate
+
+  contains
+
+    !> The distinct ranks owning element e or an element sharing a node with it.
+    subroutine ranks_needing(e, ranks, nr)
+      integer(ip), intent(in) :: e
+      integer(ip), intent(out) :: ranks(27), nr
+      integer(ip) :: near(27), nnear, m, r
+      call dec%mesh%elements_near(dec%mesh%element_ijk(e), -1_ip, 1_ip, near, nnear)
+      nr = 0
+      do m = 1, nnear
+        r = dec%subdomain_rank(esub(near(m)))
+        if (any(ranks(1:nr) == r)) cycle
+        nr = nr + 1
+        ranks(nr) = r
+      end do
+    end subroutine ranks_needing
+  end subroutine distribute_elements
+
+  !> Position of subdomain `id` in local_subdomains (binary search), 0 when
+  !> this rank does not own it.
+  pure integer(ip) function local_position(dec, id)
+    type(decomposition_t), intent(in) :: dec
+    integer(ip), intent(in) :: id
+    local_position = find_sorted(dec%local_subdomains, id)
+  end function local_position
+
+  !> Index of `key` in the ascending `list`, 0 when absent.
+  pure integer(ip) function find_sorted(list, key) result(pos)
+    integer(ip), intent(in) :: list(:), key
+    integer(ip) :: lo, hi, mid
+    lo = 1
+    hi = size(list, kind=ip)
+    pos = 0
+    do while (lo <= hi)
+      mid = (lo + hi)/2
+      if (list(mid) == key) then
+        pos = mid
+        return
+      else if (list(mid) < key) then
+        lo = mid + 1
+      else
+        hi = mid - 1
+      end if
+    end do
+  end function find_sorted
 
   !> METIS parts of the whole mesh, split into face-connected subdomains (rank 0).
   subroutine metis_partition(mesh, element_subdomain, nsubdomains)
@@ -227,55 +365,40 @@ contains
     end do
   end function block_mapping
 
-  !> Elements of each subdomain, CSR by subdomain id, ascending gids.
-  subroutine element_lists(dec)
-    type(decomposition_t), intent(inout) :: dec
-    integer(ip) :: ne, e, s
-    integer(ip), allocatable :: next(:)
-    ne = size(dec%element_subdomain)
-    allocate (dec%subdomain_element_ptr(dec%nsubdomains + 1), dec%subdomain_elements(ne), &
-              next(dec%nsubdomains))
-    dec%subdomain_element_ptr = 0
+  !> Element counts and the subdomain graph (s, t neighbours when they share
+  !> a node; CSR, neighbours ascending) from the subdomain of every element
+  !> (rank 0, at set-up).
+  subroutine element_graph(mesh, esub, n, nelem, xadj, adjncy)
+    type(box_mesh_t), intent(in) :: mesh
+    integer(ip), intent(in) :: esub(:), n
+    integer(ip), allocatable, intent(out) :: nelem(:), xadj(:), adjncy(:)
+    integer(ip), allocatable :: ptr(:), list(:), next(:), marker(:)
+    integer(ip) :: ne, e, s, t, k, m, near(27), nnear, nadj, first
+    ne = size(esub, kind=ip)
+    allocate (nelem(n), ptr(n + 1), list(ne), next(n))
+    nelem = 0
     do e = 1, ne
-      s = dec%element_subdomain(e)
-      dec%subdomain_element_ptr(s + 1) = dec%subdomain_element_ptr(s + 1) + 1
+      nelem(esub(e)) = nelem(esub(e)) + 1
     end do
-    dec%subdomain_element_ptr(1) = 1
-    do s = 1, dec%nsubdomains
-      dec%subdomain_element_ptr(s + 1) = dec%subdomain_element_ptr(s + 1) + dec%subdomain_element_ptr(s)
+    ptr(1) = 1
+    do s = 1, n
+      ptr(s + 1) = ptr(s) + nelem(s)
     end do
-    next = dec%subdomain_element_ptr(1:dec%nsubdomains)
+    next = ptr(1:n)
     do e = 1, ne
-      s = dec%element_subdomain(e)
-      dec%subdomain_elements(next(s)) = e
-      next(s) = next(s) + 1
+      list(next(esub(e))) = e
+      next(esub(e)) = next(esub(e)) + 1
     end do
-  end subroutine element_lists
-
-  !> Subdomain adjacency graph (1-based CSR, no self loops, neighbours
-  !> ascending): s and t are neighbours when they share at least one node.
-  subroutine subdomain_graph(dec, xadj, adjncy)
-    type(decomposition_t), intent(in) :: dec
-    integer(ip), allocatable, intent(out) :: xadj(:), adjncy(:)
-    integer(ip), allocatable :: marker(:)
-    integer(ip) :: n, s, t, k, e, m, near(27), nnear, nadj, first
-
-    n = dec%nsubdomains
-    if (dec%is_box()) then
-      call box_subdomain_graph(dec%mesh%nsub, xadj, adjncy)
-      return
-    end if
     allocate (xadj(n + 1), marker(n), adjncy(max(16, 8*n)))
     marker = 0
     nadj = 0
     xadj(1) = 1
     do s = 1, n
       first = nadj + 1
-      do k = dec%subdomain_element_ptr(s), dec%subdomain_element_ptr(s + 1) - 1
-        e = dec%subdomain_elements(k)
-        call dec%mesh%elements_near(dec%mesh%element_ijk(e), -1_ip, 1_ip, near, nnear)
+      do k = ptr(s), ptr(s + 1) - 1
+        call mesh%elements_near(mesh%element_ijk(list(k)), -1_ip, 1_ip, near, nnear)
         do m = 1, nnear
-          t = dec%element_subdomain(near(m))
+          t = esub(near(m))
           if (t /= s) call append_unmarked(adjncy, nadj, t, marker, s)
         end do
       end do
@@ -283,6 +406,19 @@ contains
       xadj(s + 1) = nadj + 1
     end do
     adjncy = adjncy(1:nadj)
+  end subroutine element_graph
+
+  !> Subdomain adjacency graph (1-based CSR, no self loops, neighbours
+  !> ascending): s and t are neighbours when they share at least one node.
+  subroutine subdomain_graph(dec, xadj, adjncy)
+    type(decomposition_t), intent(in) :: dec
+    integer(ip), allocatable, intent(out) :: xadj(:), adjncy(:)
+    if (dec%is_box()) then
+      call box_subdomain_graph(dec%mesh%nsub, xadj, adjncy)
+    else
+      xadj = dec%graph_xadj
+      adjncy = dec%graph_adjncy
+    end if
   end subroutine subdomain_graph
 
   !> The subdomain graph of box subdomains: box (I,J,K) shares a node with
@@ -387,6 +523,7 @@ contains
     n = 0
     do k = 1, nnear
       s = this%subdomain_of_element(near(k))
+      if (s == 0) cycle                  ! unknown element (METIS, not near this rank's subdomains)
       ! insert s into the sorted ids(1:n) unless present
       pos = n + 1
       do m = 1, n
@@ -411,7 +548,7 @@ contains
     if (this%is_box()) then
       subdomain_nelements = product(this%mesh%nel)
     else
-      subdomain_nelements = this%subdomain_element_ptr(id + 1) - this%subdomain_element_ptr(id)
+      subdomain_nelements = this%subdomain_nelem(id)
     end if
   end function subdomain_nelements
 
@@ -421,26 +558,36 @@ contains
     is_box = trim(this%method) == 'box'
   end function is_box
 
-  !> Id of the subdomain holding element `gid`.
+  !> Id of the subdomain holding element `gid`. METIS: known for the elements
+  !> of this rank's subdomains and those sharing a node with them, else 0.
   pure integer(ip) function subdomain_of_element(this, gid)
     class(decomposition_t), intent(in) :: this
     integer(ip), intent(in) :: gid
+    integer(ip) :: k
     if (this%is_box()) then
       subdomain_of_element = this%mesh%box_subdomain(gid)
     else
-      subdomain_of_element = this%element_subdomain(gid)
+      k = find_sorted(this%known_gids, gid)
+      subdomain_of_element = 0
+      if (k > 0) subdomain_of_element = this%known_subdomain(k)
     end if
   end function subdomain_of_element
 
   !> The element gids of subdomain `id`, ascending. Box: the elements (i,j,k)
   !> with I*nel(1) <= i < (I+1)*nel(1) (and so on), k slowest then j then i.
+  !> METIS: for this rank's subdomains (empty for the others).
   pure function subdomain_element_gids(this, id) result(gids)
     class(decomposition_t), intent(in) :: this
     integer(ip), intent(in) :: id
     integer(ip), allocatable :: gids(:)
     integer(ip) :: b(3), lo(3), i, j, k, n
     if (.not. this%is_box()) then
-      gids = this%subdomain_elements(this%subdomain_element_ptr(id):this%subdomain_element_ptr(id + 1) - 1)
+      k = local_position(this, id)
+      if (k == 0) then
+        allocate (gids(0))
+      else
+        gids = this%subdomain_elements(this%subdomain_element_ptr(k):this%subdomain_element_ptr(k + 1) - 1)
+      end if
       return
     end if
     b = box_ijk(this%mesh%nsub, id)

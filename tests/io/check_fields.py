@@ -1,4 +1,4 @@
-"""Check the .h5 + .xdmf pair written by test_io_hdf5_output, independently of
+"""Check the .h5 + .xdmf pair written by the pFUnit test test_io_hdf5_output.pf, independently of
 the Fortran reader: the XDMF parses as XML, every dataset it references exists
 in the HDF5 file with the dimensions and number type it states, the grids are
 consistent (topology sizes, node/cell attribute lengths), the values are the
