@@ -14,6 +14,14 @@ changed. After every run, DIR/campaign.csv is rewritten with one row per run
 (also failed runs: their exit status is recorded, nothing is dropped), and at
 the end the medians per member are printed as a Markdown table.
 
+Solver variants (tools/variants.py): --variant NAME:VAR=VALUE[;VAR=VALUE] (&solver settings,
+repeatable) and --variants V1,V2 (&solver preconditioner = 'V1', ...; --variant-variable names
+another variable) run every member once per variant, as member NAME@VARIANT with the column
+`variant`; each variant is checked first with `feticontact --check` (a variable or value the
+program rejects stops the campaign with its message), and a second table compares the
+variants: outer and Hessian counts, products per outer iteration, the late contraction of
+||C x|| per outer iteration, solve and total time, exit status and KKT pass/fail.
+
 With --scheduler slurm the same run folders and merged inputs are written, but each member
 and rank count becomes one sbatch job script (runs/<member>/np<P>/job.sh, its repetitions one
 after the other inside it), submitted unless --dry-run; DIR/jobs.json records the job ids.
@@ -30,6 +38,10 @@ Examples (from the repository root):
         inputs/weak/cube_h4_n8.nml inputs/weak/cube_h4_n64.nml inputs/weak/cube_h4_n512.nml
     tools/campaign.py --ranks 2 --out output/campaigns/tol_block --set mesh:nel=2,2,2 \\
         --sweep "solver:tol=1e-2,1e-4,1e-6,1e-8,1e-10" inputs/block.nml
+    tools/campaign.py --ranks 2 --out output/campaigns/weak_variants --variants none,lumped,dirichlet \\
+        'inputs/weak/cube_h4_n*.nml'
+    tools/campaign.py --ranks 2 --out output/campaigns/rho --variant default \\
+        --variant "rho2:rho_growth=2;m_no_step=keep" inputs/weak/cube_h4_n64.nml
     tools/campaign.py --scheduler slurm --ranks 256 --reps 3 --time 0:30:00 --mem-per-rank 1G \\
         --partition standard --out /scratch/$USER/paper inputs/weak/cube_h4_n4096.nml
     tools/campaign.py --status /scratch/$USER/paper
@@ -57,6 +69,8 @@ import subprocess
 import sys
 import time
 
+import variants as solver_variants  # tools/variants.py (this folder is on sys.path)
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 # Phases in the order the program runs them; phases not listed here (a timer
@@ -66,7 +80,7 @@ KNOWN_PHASES = ["total", "mesh", "assembly", "factorization", "B and G", "coarse
                 "F action", "coarse solve"]  # the last two are nested in dual setup, solve, ...
 
 # Columns before the timing columns, in CSV order: (column, path in report.json or None).
-RUN_COLUMNS = ["campaign", "member", "input", "overrides", "ranks", "rep", "exit_status", "status", "message",
+RUN_COLUMNS = ["campaign", "member", "variant", "input", "overrides", "ranks", "rep", "exit_status", "status", "message",
                "wall_seconds", "started", "load_before", "job_id", "run_dir", "h5"]
 REPORT_COLUMNS = [
     ("case", ("case", "output", "run_name")),
@@ -100,6 +114,10 @@ REPORT_COLUMNS = [
     ("rho", ("solver", "rho")),
     ("norm_pfp", ("solver", "norm_pfp")),
     ("f_applications", ("solver", "f_applications")),
+    ("solver_variant", ("solver", "variant")),
+    ("hessian_per_outer", ("solver", "hessian_per_outer_mean")),
+    ("contraction_median", ("solver", "contraction_median")),
+    ("contraction_late", ("solver", "contraction_late")),
     ("coarse_solves", ("solver", "coarse_solves")),
     ("kkt_equilibrium", ("kkt", "equilibrium")),
     ("kkt_equality", ("kkt", "equality")),
@@ -255,8 +273,8 @@ def slug(text):
     return re.sub(r"[^A-Za-z0-9_.=-]+", "_", text).strip("_")
 
 
-def build_members(inputs, sweeps):
-    """One member per (input, combination of sweep values)."""
+def build_members(inputs, sweeps, variants=()):
+    """One member per (input, combination of sweep values, solver variant): NAME[sweep]@VARIANT."""
     members = []
     combos = list(itertools.product(*sweeps)) if sweeps else [()]
     for path in inputs:
@@ -264,7 +282,12 @@ def build_members(inputs, sweeps):
         for combo in combos:
             tag = ",".join("%s=%s" % (v, value) for g, v, value in combo)
             name = stem + ("[%s]" % tag if tag else "")
-            members.append({"name": name, "input": path, "sweep": list(combo)})
+            for variant in variants or [None]:
+                if variant is None:
+                    members.append({"name": name, "input": path, "sweep": list(combo), "variant": ""})
+                else:
+                    members.append({"name": name + "@" + variant["name"], "input": path,
+                                    "sweep": list(combo) + list(variant["settings"]), "variant": variant["name"]})
     return members
 
 
@@ -499,6 +522,42 @@ def summary_table(rows):
     return "\n".join(lines + notes)
 
 
+def variant_table(rows):
+    """Markdown table comparing the solver variants: one row per (member without its variant,
+    ranks, variant), medians over every run that left a report.json (not-converged runs too:
+    their counts are what a variant costs), or the exit status alone."""
+    groups = {}
+    for r in rows:
+        if not r.get("variant"):
+            continue
+        base = r["member"][:-len(r["variant"]) - 1] if r["member"].endswith("@" + r["variant"]) else r["member"]
+        groups.setdefault((base, r["ranks"], r["variant"]), []).append(r)
+    if not groups:
+        return ""
+    head = ["case", "ranks", "variant", "runs", "exit", "outer", "Hessian", "Hessian/outer", "contraction",
+            "solve [s]", "total [s]", "KKT", "settings"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] * 3 + ["---:"] * 8 + ["---"] * 2) + "|"]
+    for (base, ranks, variant), runs in sorted(groups.items(), key=lambda kv: (natural_key(kv[0][0]),
+                                                                               int(kv[0][1]))):
+        rep_rows = [r for r in runs if r.get("outer_iterations")]
+        exits = sorted({r.get("exit_status") or "-" for r in runs})
+        kkt = sorted({"pass" if r.get("kkt_passed") == "true" else "fail" for r in rep_rows}) or ["-"]
+        settings = runs[0].get("solver_variant") or "-"
+        lines.append("| " + " | ".join([
+            base, str(ranks), variant, str(len(runs)), ",".join(exits),
+            fmt(median_of(rep_rows, "outer_iterations"), "int"),
+            fmt(median_of(rep_rows, "hessian_multiplications"), "int"),
+            fmt(median_of(rep_rows, "hessian_per_outer"), "f1"),
+            fmt(median_of(rep_rows, "contraction_late"), "s"),
+            fmt(median_of(rep_rows, "t_solve_max"), "s"), fmt(median_of(rep_rows, "t_total_max"), "s"),
+            "/".join(kkt), settings]) + " |")
+    notes = ["", "Medians over the runs with a report.json; exit: the exit statuses seen (0 converged, 3 not",
+             "converged, 4 KKT check failed); contraction: the geometric mean of ||C x_k|| / ||C x_(k-1)|| over",
+             "the second half of the outer iterations (report.json solver.contraction_late); settings: the",
+             "&solver settings that differ from the defaults (report.json solver.variant)."]
+    return "\n".join(lines + notes)
+
+
 # ---------------------------------------------------------------- runs (both back ends)
 # A run is one execution of one member on one rank count, repetition k, in its own folder
 # DIR/runs/<member>/np<P>/rep<k>/. Both back ends prepare it with prepare_run() and turn what it
@@ -529,7 +588,7 @@ def prepare_run(out, member, np_, rep, overrides, area="runs"):
         "%s:%s=%s" % o for o in overrides) or "no overrides")
     write_namelist(groups, os.path.join(run_dir, "case.nml"), header)
     inp = os.path.abspath(member["input"])
-    record = {"campaign": os.path.basename(out), "member": member["name"],
+    record = {"campaign": os.path.basename(out), "member": member["name"], "variant": member.get("variant", ""),
               "input": os.path.relpath(inp, ROOT) if inp.startswith(ROOT + os.sep) else member["input"],
               "overrides": " ".join("%s:%s=%s" % o for o in overrides), "ranks": np_, "rep": rep, "run_dir": run_dir}
     with open(os.path.join(run_dir, "run.json"), "w") as f:
@@ -566,6 +625,7 @@ def run_row(record, outcome):
     run_dir = record["run_dir"]
     code = outcome.get("exit_status")
     row = {k: str(record[k]) for k in ("campaign", "member", "input", "overrides", "ranks", "rep")}
+    row["variant"] = str(record.get("variant", ""))
     row.update(run_dir=run_dir, exit_status="" if code is None else str(code),
                wall_seconds=outcome.get("wall_seconds", ""), started=outcome.get("started", ""),
                load_before=outcome.get("load_before", ""), job_id=outcome.get("job_id", ""))
@@ -653,6 +713,9 @@ def run_local(args, plan, out, program, rows):
     print("\ncampaign: %d runs, %d failed, %s; CSV %s\n" % (len(plan), failures,
                                                         fmt_duration(time.monotonic() - t_start), csv_path))
     print(summary_table(rows))
+    table = variant_table(rows)
+    if table:
+        print("\n" + table)
     return 1 if failures else 0
 
 
@@ -1055,6 +1118,9 @@ def collect_slurm(out, wait, poll):
     print("\ncampaign: %d runs finished, %d failed, %d not finished; CSV %s\n" % (len(rows), failures, unfinished,
                                                                                  csv_path))
     print(summary_table(rows))
+    table = variant_table(rows)
+    if table:
+        print("\n" + table)
     return 1 if failures else (3 if unfinished else 0)
 
 
@@ -1071,6 +1137,13 @@ def main():
                     metavar="GROUP:VAR=VALUE", help="namelist override merged into every input (repeatable)")
     ap.add_argument("--sweep", action="append", default=[], type=parse_sweep, metavar="GROUP:VAR=V1,V2,...",
                     help="one member per value (repeatable: the product); separate list values by ';'")
+    ap.add_argument("--variant", action="append", default=[], metavar="NAME[:VAR=VALUE;...]",
+                    help="a solver variant: a name and &solver settings (GROUP:VAR=VALUE for another group); "
+                         "every member runs once per variant (repeatable; see tools/variants.py)")
+    ap.add_argument("--variants", metavar="V1,V2,...",
+                    help="one variant per value of --variant-variable: &solver preconditioner = 'V1', ...")
+    ap.add_argument("--variant-variable", default="preconditioner",
+                    help="the &solver variable that --variants sets (default %(default)s)")
     ap.add_argument("--program", default=os.path.join(ROOT, "build", "bin", "feticontact"),
                     help="feticontact executable (default %(default)s)")
     ap.add_argument("--mpiexec", help="MPI launcher (default: mpirun; local: its full path)")
@@ -1122,7 +1195,11 @@ def main():
 
     if args.summary:
         path = os.path.join(args.summary, "campaign.csv") if os.path.isdir(args.summary) else args.summary
-        print(summary_table(read_csv(path)))
+        rows = read_csv(path)
+        print(summary_table(rows))
+        table = variant_table(rows)
+        if table:
+            print("\n" + table)
         return 0
     if args.status:
         out = os.path.abspath(args.status)
@@ -1162,7 +1239,18 @@ def main():
         ap.error("--scheduler slurm: no sbatch on PATH (tools/local_slurm.sh starts a Slurm on this machine)")
 
     inputs = expand_inputs(args.inputs)
-    members = build_members(inputs, args.sweep)
+    try:
+        variants = solver_variants.collect(args.variant, args.variants, args.variant_variable)
+        if variants and os.access(program, os.X_OK):
+            with open(inputs[0]) as f:
+                groups = merge_overrides(parse_namelist(f.read()), args.overrides)
+            solver_variants.check_variants(variants, groups, program, write_namelist,
+                                           None if slurm else (args.mpiexec or shutil.which("mpirun")),
+                                           shlex.split(LOCAL_MPI_ARGS if args.mpi_args is None else args.mpi_args)
+                                           if not slurm else ())
+    except ValueError as e:
+        sys.exit("campaign: %s" % e)
+    members = build_members(inputs, args.sweep, variants)
     out = os.path.abspath(args.out)
     csv_path = os.path.join(out, "campaign.csv")
     os.makedirs(out, exist_ok=True)
@@ -1187,7 +1275,8 @@ def main():
             if os.path.exists(program) else None,
             "git_commit": git_commit(), "host": socket.gethostname(), "cpus": os.cpu_count(),
             "started": datetime.datetime.now().isoformat(timespec="seconds"),
-            "inputs": inputs, "ranks": ranks, "reps": args.reps, "scheduler": args.scheduler}
+            "inputs": inputs, "ranks": ranks, "reps": args.reps, "scheduler": args.scheduler,
+            "variants": [{"name": v["name"], "settings": solver_variants.describe(v)} for v in variants]}
     if not args.dry_run:
         write_meta(out, meta, args.append)
     if not slurm:

@@ -5,7 +5,9 @@
 !>                     sqrt(2 sum_c (u_c - mean)^2) per node and component (the
 !>                     jump |u_1 - u_2| for two copies), / U;
 !> - dirichlet:        the largest |u_i - prescribed value| on Dirichlet rows / U;
-!> - penetration:      the largest max(-u_z - gap, 0) on contact rows / U;
+!> - penetration:      the largest max(-u_z - gap, 0) on contact rows / U, u_z
+!>                     the mean of the node's copies weighted as the contact row
+!>                     (constraints; the copies' spread is the gluing residual);
 !> - equilibrium:      per subdomain s, ||K u - f + B^T lambda||_s / max(||K u||_s,
 !>                     ||f||_s, ||B^T lambda||_s, max|K_s| U), the largest over
 !>                     s: every subdomain is measured against its own forces,
@@ -14,7 +16,8 @@
 !>                     imbalance counts by the displacement it causes);
 !> - dual_feasibility: ||min(lambda_I, 0)|| / ||lambda_I|| (contact forces >= 0);
 !> - complementarity:  max_i |force_i| |gap_i(u)| / (max_i |force_i| U) on the
-!>                     contact rows (force = row scale x multiplier).
+!>                     contact rows (force = row scale x multiplier = the sum
+!>                     over the node's copies of (B^T lambda)_z, up to sign).
 !> The constraint rows are divided by their scale (&solver scaling), so that
 !> the violations are displacements whatever the weighting of the rows.
 !> `equality` = max(gluing, dirichlet) and `feasibility` = penetration are kept

@@ -11,17 +11,26 @@
 !>   copies 1..k+1. Non-redundant so that B has full row rank; orthonormal so
 !>   that B_E B_E^T = I also where 4 or 8 subdomains meet.
 !> - contact, component z of a node of the face z = 0 under the obstacle's
-!>   footprint: one row on the copy in s_1, B = -e_z, c = g = z - psi(x, y)
-!>   (-u_z <= g, multiplier >= 0).
+!>   footprint: one row spread over all m copies of the node with the gluing
+!>   weights w_c (below; all 1 without scaling), S = w_1 + ... + w_m:
+!>   B = -(w_1 e_z,1 + ... + w_m e_z,m)/sqrt(S), c = sqrt(S) g, g = z - psi(x, y)
+!>   (-(weighted mean of u_z) <= g, multiplier >= 0); owned like the gluing
+!>   rows (rank of s_1). With the gluing rows it is the same constraint as
+!>   -u_z <= g on any one copy, and (w_1, ..., w_m) is orthogonal to every
+!>   weighted Helmert row in the diag(1/w) inner product with unit weighted
+!>   norm, so B diag(1/w) B^T = I holds on contact nodes too. The copies
+!>   together carry the force: sum_c (B^T lambda~)_z,c = -sqrt(S) lambda~, so
+!>   scale = unit = sqrt(S).
 !> Scaling (&solver scaling = 'young', the default): with w_c = E(s_c)/young the
 !> relative Young's modulus of the subdomain of copy c, the gluing row k becomes
 !> alpha_k (w_1, ..., w_k, -S_k, 0, ...), S_k = w_1 + ... + w_k,
-!> alpha_k = 1/sqrt(S_k (1 + S_k/w_(k+1))), and Dirichlet and contact rows are
-!> multiplied by sqrt(w) of their copy (c too). The rows span the same space as
-!> before (same constraints, same primal solution) and are orthonormal in the
-!> inner product weighted by diag(1/w): B diag(1/w) B^T = I per node, which makes
-!> the lumped approximation B diag(1/E) B^T of F scale-free across material
-!> jumps ("reorthogonalized rho-scaling"). A multiplier of a scaled row is
+!> alpha_k = 1/sqrt(S_k (1 + S_k/w_(k+1))), Dirichlet rows are multiplied by
+!> sqrt(w) of their copy (c too), and contact rows take the weights as above.
+!> The rows span the same space as unweighted ones (same constraints, same
+!> primal solution) and are orthonormal in the inner product weighted by
+!> diag(1/w): B diag(1/w) B^T = I per node, which makes the lumped
+!> approximation B diag(1/E) B^T of F scale-free across material jumps
+!> ("reorthogonalized rho-scaling"). A multiplier of a scaled row is
 !> lambda~ = lambda/s with s = `scale` of the row: the force is scale*lambda~.
 !> With equal moduli (variation 'none') every w_c = 1 and the rows are the
 !> unweighted ones bit for bit.
@@ -72,8 +81,8 @@ module constraints
     real(dp), allocatable :: c(:)             !< (n_own) right-hand side
     real(dp), allocatable :: scale(:)         !< (n_own) force = scale * multiplier (1 unless &solver scaling)
     !> (n_own) a row's value is unit x a displacement: (B u - c)_i / unit_i is
-    !> the violation in displacement units (Dirichlet, contact: sqrt(w) as
-    !> scale; gluing: the weighted Helmert row k is unit x (the w-weighted mean
+    !> the violation in displacement units (Dirichlet: sqrt(w), contact:
+    !> sqrt(S), as scale; gluing: the weighted Helmert row k is unit x (the w-weighted mean
     !> of copies 1..k minus copy k+1), unit = alpha_k S_k, sqrt(k/(k+1)) unweighted)
     real(dp), allocatable :: unit(:)
     integer(ip), allocatable :: node(:)       !< (n_own) node gid
@@ -293,9 +302,11 @@ contains
               end do
             end if
           end do
-          if (contact .and. j == 1) then
-            call emit(row_key(gid, 3_ip, row_contact, 1_ip), int(me), ls, 3*(a - 1) + 3, a, gid, &
-                      row_contact, j, -sqrt(w(1)), sqrt(w(1))*gap, sqrt(w(1)), sqrt(w(1)))
+          if (contact) then
+            ! spread over all copies with the gluing weights (see the module header)
+            sk = sum(w(1:m))
+            call emit(row_key(gid, 3_ip, row_contact, 1_ip), owner, ls, 3*(a - 1) + 3, a, gid, &
+                      row_contact, j, -w(j)/sqrt(sk), sqrt(sk)*gap, sqrt(sk), sqrt(sk))
           end if
         end do
       end do
@@ -365,8 +376,8 @@ contains
   end subroutine node_conditions
 
   !> The neighbour exchange: ghosts are received from their owners in the
-  !> order of `ghost_owner`; owned gluing rows are sent to every other rank
-  !> holding one of their copies, in key order.
+  !> order of `ghost_owner`; owned gluing and contact rows are sent to every
+  !> other rank holding one of their copies, in key order.
   subroutine build_exchange(dec, con, ghost_owner, me)
     type(decomposition_t), intent(in) :: dec
     type(constraints_t), intent(inout) :: con
@@ -384,10 +395,14 @@ contains
     allocate (dest_rank(16*con%n_own + 1), dest_row(16*con%n_own + 1))
     n = 0
     do i = 1, con%n_own
-      if (con%kind(i) /= row_gluing) cycle
-      index = int(mod(con%key(i), 8_i8), ip) + 1
+      if (con%kind(i) == row_dirichlet) cycle
       call dec%node_subdomain_list(con%node(i), copies, ncopies)
-      ranks_here = [(dec%subdomain_rank(copies(k)), k = 1, index + 1)]
+      if (con%kind(i) == row_gluing) then
+        index = int(mod(con%key(i), 8_i8), ip) + 1   ! Helmert row k touches copies 1..k+1
+        ranks_here = [(dec%subdomain_rank(copies(k)), k = 1, index + 1)]
+      else
+        ranks_here = [(dec%subdomain_rank(copies(k)), k = 1, ncopies)]   ! contact: every copy
+      end if
       do k = 1, size(ranks_here)
         if (ranks_here(k) == me) cycle
         if (any(ranks_here(1:k - 1) == ranks_here(k))) cycle

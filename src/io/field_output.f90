@@ -1,6 +1,7 @@
 !> The fields of a run to HDF5 + XDMF (hdf5_output): each rank's subdomains
 !> (coordinates, displacement, connectivity, subdomain id, von Mises stress)
-!> and its owned contact rows (coordinates, pressure, deformed gap c - B u).
+!> and its owned contact rows (coordinates, pressure, deformed gap (c - B u)/scale, a
+!> displacement: the gap of the weighted mean of the node's copies).
 module field_output
   use kinds, only: dp, ip
   use assembly, only: subdomain_von_mises
@@ -50,7 +51,7 @@ contains
     end do
     allocate (bu(op%n_own()))
     call op%apply_b(u, bu)
-    gap = op%gap_rhs() - bu
+    gap = (op%gap_rhs() - bu)/op%force_scale()
     x = op%row_coordinates()
     k = 0
     do i = 1, op%n_own()

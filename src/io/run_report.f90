@@ -6,7 +6,7 @@ module run_report
   use kinds, only: dp, ip, i8, MPI_INT_I8
   use timers, only: timer_stat_t
   use logger, only: log_message
-  use params, only: params_t
+  use params, only: params_t, param_item_t, param_items, default_params
   use feti_operators, only: feti_t, feti_sizes_t
   use coarse_problem, only: coarse_problem_t
   use qp_problem, only: qp_status_name
@@ -71,6 +71,8 @@ contains
     call js%add_each([character(len=24) :: 'projected_gradient', 'equality_residual', 'norm_b', 'rho', 'norm_pfp'], &
                      [solver%gp_norm, solver%cnorm, solver%norm_b, dual%rho(), op%norm_pfp()])
     call js%add_each([character(len=16) :: 'f_applications', 'coarse_solves'], [op%f_applications(), op%coarse_solves()])
+    call js%add('variant', solver_variant(p))
+    call add_outer_history(js, solver)
     ! MPRGP in the face: the preconditioner and the condition estimate of the
     ! operator its CG runs saw (Ritz values of the Lanczos matrices of the CG
     ! coefficients; null when no run had 2 steps)
@@ -157,6 +159,109 @@ contains
       end if
     end subroutine add_stat_max
   end subroutine write_run_report
+
+  !> The solver variant of the run: the &solver settings that differ from their
+  !> defaults, as 'name=value' separated by ', ' (values as the namelist
+  !> writes them; `monitor` left out: it changes no iterate), or 'default'.
+  function solver_variant(p) result(text)
+    type(params_t), intent(in) :: p
+    character(len=:), allocatable :: text
+    type(param_item_t), allocatable :: items(:), defaults(:)
+    integer :: k, j, i
+    call param_items(p, 'solver', items)
+    call param_items(default_params(), 'solver', defaults)
+    text = ''
+    do k = 1, size(items)
+      if (items(k)%name == 'monitor') cycle
+      j = 0
+      do i = 1, size(defaults)
+        if (defaults(i)%name == items(k)%name) j = i
+      end do
+      if (j > 0) then
+        if (all(items(k)%values == defaults(j)%values)) cycle
+      end if
+      if (len(text) > 0) text = text//', '
+      text = text//trim(items(k)%name)//'='//short(items(k)%values(1), items(k)%kind)
+      do j = 2, items(k)%n
+        text = text//','//short(items(k)%values(j), items(k)%kind)
+      end do
+    end do
+    if (len(text) == 0) text = 'default'
+  contains
+    !> A real without the trailing zeros of its mantissa (2.0000 -> 2.0, 1.5000E-08 -> 1.5E-08).
+    function short(value, kind) result(v)
+      character(len=*), intent(in) :: value
+      character, intent(in) :: kind
+      character(len=:), allocatable :: v, mantissa
+      integer :: e
+      v = trim(adjustl(value))
+      if (kind /= 'r' .or. index(v, '.') == 0) return
+      e = scan(v, 'EeDd')
+      if (e == 0) e = len(v) + 1
+      mantissa = v(1:e - 1)
+      do while (len(mantissa) > 1)
+        if (mantissa(len(mantissa):len(mantissa)) /= '0' .or. &
+            mantissa(len(mantissa) - 1:len(mantissa) - 1) == '.') exit
+        mantissa = mantissa(1:len(mantissa) - 1)
+      end do
+      v = mantissa//v(e:)
+    end function short
+  end function solver_variant
+
+  !> The SMALBE monitor's per-outer figures: ||C x_k|| (`cnorm_per_outer`), the
+  !> Hessian multiplications after outer iteration k (`hessian_per_outer`,
+  !> cumulative), the contraction ||C x_k|| / ||C x_(k-1)|| for k >= 2
+  !> (`contraction_per_outer`), its median and its geometric mean over the
+  !> second half of the outer iterations (`contraction_late`, the linear rate;
+  !> null with fewer than 2 outer iterations), and the Hessian multiplications
+  !> per outer iteration (`hessian_per_outer_mean`).
+  subroutine add_outer_history(js, solver)
+    type(json_writer_t), intent(inout) :: js
+    type(smalbe_t), intent(in) :: solver
+    real(dp), allocatable :: c(:), q(:), sorted(:)
+    integer(ip), allocatable :: h(:)
+    integer(ip) :: k, j, nq, first
+    real(dp) :: t
+    allocate (c(0), h(0))
+    if (allocated(solver%cnorm_history)) c = solver%cnorm_history
+    if (allocated(solver%hessian_history)) h = solver%hessian_history
+    nq = max(size(c, kind=ip) - 1, 0_ip)
+    allocate (q(nq))
+    do k = 1, nq
+      if (c(k) > 0) then
+        q(k) = c(k + 1)/c(k)
+      else
+        q(k) = 0
+      end if
+    end do
+    call js%add('cnorm_per_outer', c)
+    call js%add('hessian_per_outer', h)
+    call js%add('contraction_per_outer', q)
+    if (nq > 0) then
+      sorted = q
+      do k = 2, nq                            ! insertion sort: at most max_outer values
+        t = sorted(k)
+        j = k - 1
+        do while (j >= 1)
+          if (sorted(j) <= t) exit
+          sorted(j + 1) = sorted(j)
+          j = j - 1
+        end do
+        sorted(j + 1) = t
+      end do
+      call js%add('contraction_median', 0.5_dp*(sorted((nq + 1)/2) + sorted(nq/2 + 1)))
+      first = nq/2 + 1
+      if (all(q(first:nq) > 0)) then
+        call js%add('contraction_late', exp(sum(log(q(first:nq)))/(nq - first + 1)))
+      else
+        call js%add('contraction_late', 0.0_dp)
+      end if
+    else
+      call js%add_null('contraction_median')
+      call js%add_null('contraction_late')
+    end if
+    call js%add('hessian_per_outer_mean', real(solver%n_hessian, dp)/max(solver%n_outer, 1_ip))
+  end subroutine add_outer_history
 
   !> Where the output is and how to look at it (a user's first question).
   subroutine log_where_to_look(p)

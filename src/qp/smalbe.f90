@@ -62,6 +62,9 @@
 !> total (inner solves get the remaining budget); either ends the solve with a
 !> "not converged" status and a message, as do NaN/Inf (qp_status_not_finite).
 !>
+!> History: cnorm_history(k) = ||C x_k|| and hessian_history(k) = Hessian
+!> multiplications after outer iteration k (the SMALBE monitor's columns).
+!>
 !> Monitor (monitor = .true., rank 0 through module logger): a header with
 !> rho, ||A||, M_0, eta, tol ||b||; one line per outer iteration: outer
 !> iteration, inner iterations of this outer iteration, Hessian
@@ -172,6 +175,11 @@ module smalbe
     integer(ip) :: n_active = 0                !< components at their bound at the returned x
     integer(ip) :: n_preconditioner = 0        !< preconditioner applications in all (MPRGP in the face)
     logical :: preconditioned = .false.        !< the inner MPRGP used the problem's preconditioner
+    !> per outer iteration k of the last solve: ||C x_k|| after the inner solve
+    !> and the Hessian multiplications so far (report.json: the contraction
+    !> ||C x_k|| / ||C x_(k-1)|| and the products per outer iteration)
+    real(dp), allocatable :: cnorm_history(:)
+    integer(ip), allocatable :: hessian_history(:)
     real(dp), allocatable, private :: b_lin(:), ct_mu(:), ct_new(:), x_prev(:), g_prev(:)
     type(smalbe_inner_stop_t), private :: rule
   contains
@@ -465,6 +473,8 @@ contains
         self%rule%n_eq_residual = self%rule%n_eq_residual + 1
       end if
       self%cnorm = self%rule%cnorm
+      self%cnorm_history = [self%cnorm_history, self%cnorm]
+      self%hessian_history = [self%hessian_history, self%n_hessian]
       ! the outer criterion's measures at the final x: from the rule when its
       ! last evaluation belongs to this x and got that far, else now
       if (.not. (self%inner%status == qp_status_converged .and. self%rule%evaluated .and. &
@@ -652,6 +662,8 @@ contains
     self%n_norm_updates = 0
     self%n_active = 0
     self%n_preconditioner = 0
+    self%cnorm_history = [real(dp) ::]
+    self%hessian_history = [integer(ip) ::]
   end subroutine reset_counters
 
   subroutine monitor_header(self)

@@ -92,6 +92,13 @@ def main():
               "failed run recorded with exit status 3 (got %s, %s)" % (r["exit_status"], r["status"]))
         check(r["converged"] == "false", "failed run: converged = false (its report.json is read)")
     check("FAILED: tiny_block[max_hessian=1]" in run.stdout, "the summary names the failed run")
+    if len(good) == 1:
+        r = good[0]
+        check(r["solver_variant"].startswith("tol=") and "monitor" not in r["solver_variant"],
+              "solver_variant: the changed &solver settings (tol; monitor left out), got %r" % r["solver_variant"])
+        check(float(r["hessian_per_outer"]) > 0 and (r["contraction_median"] != "" or r["outer_iterations"] == "1"),
+              "products per outer iteration and the contraction of ||C x|| recorded")
+    check_variants(args)
 
     figures = os.path.join(args.workdir, "figures")
     for sub in (["weak", out, "--name", "t_weak"], ["reconstruction", out, "--name", "t_rec"]):
@@ -104,6 +111,46 @@ def main():
             os.path.join(figures, name + ".png")) else False, "%s.png written" % name)
     print("%d failed" % len(FAILURES))
     return 1 if FAILURES else 0
+
+
+def check_variants(args):
+    """Two solver variants (--variant): one run each, the `variant` column, report.json's
+    solver.variant naming the changed &solver settings, the variant table; a variant whose
+    variable the program does not know stops the campaign before any run, with the
+    program's message."""
+    out = os.path.join(args.workdir, "campaign_variants")
+    base = [sys.executable, os.path.join(TOOLS, "campaign.py"), "--program", args.program, "--mpiexec",
+            args.mpiexec, "--ranks", "1", "--timeout", "60"]
+    cmd = base + ["--out", out, "--variant", "plain", "--variant", "keep:m_no_step=keep;beta=0.25",
+                  os.path.join(HERE, "tiny_block.nml")]
+    print("running:", " ".join(cmd))
+    run = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
+    print(run.stdout[-3000:], run.stderr[-3000:])
+    check(run.returncode == 0, "variant campaign exits 0 (got %d)" % run.returncode)
+    csv_path = os.path.join(out, "campaign.csv")
+    rows = []
+    if os.path.exists(csv_path):
+        with open(csv_path, newline="") as f:
+            rows = list(csv.DictReader(f))
+    by = {r.get("variant"): r for r in rows}
+    check(sorted(by) == ["keep", "plain"], "one row per variant with the variant column (got %s)" % sorted(by))
+    if "keep" in by and "plain" in by:
+        check(by["keep"]["member"] == "tiny_block@keep", "member named input@variant")
+        check("m_no_step=keep" in by["keep"]["solver_variant"] and "beta=0.25" in by["keep"]["solver_variant"],
+              "report.json solver.variant names the variant's settings (got %r)" % by["keep"]["solver_variant"])
+        check("m_no_step" not in by["plain"]["solver_variant"], "the plain variant changes nothing")
+        with open(os.path.join(by["keep"]["run_dir"], "case.nml")) as f:
+            nml = f.read()
+        check("m_no_step = 'keep'" in nml, "the variant's setting (quoted) is in the merged input")
+    check("| tiny_block | 1 | keep |" in run.stdout and "Hessian/outer" in run.stdout,
+          "the variant table is printed")
+    cmd = base + ["--out", out + "_bad", "--variants", "a,b", "--variant-variable", "no_such_variable",
+                  os.path.join(HERE, "tiny_block.nml")]
+    run = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    print(run.stdout[-2000:], run.stderr[-2000:])
+    check(run.returncode != 0 and "variant 'a'" in run.stderr and "rejected" in run.stderr
+          and "no_such_variable" in run.stderr, "a variant the program rejects stops the campaign with its message")
+    check(not os.path.exists(os.path.join(out + "_bad", "campaign.csv")), "nothing ran for a rejected variant")
 
 
 if __name__ == "__main__":
