@@ -16,6 +16,18 @@
 !> displacement with a force. The minimizer nu is the same; the multiplier of
 !> the scaled problem is muhat/s, and `unscaled_multiplier` gives muhat back.
 !>
+!> Preconditioner (`&solver preconditioner` 'lumped' | 'dirichlet', set by
+!> set_preconditioner): with M^{-1} of dual_preconditioner (an approximate
+!> inverse of F), the scaled Hessian A = (P F P + rho Q)/s gets
+!>
+!>     M_A^{-1} = s P M^{-1} P + (sigma/rho') Q,   rho' = rho/s = penalty(),
+!>
+!> so that M_A^{-1} A = P M^{-1} P F P + sigma Q: the spectrum of the FETI
+!> preconditioned operator on Im P (about [1, C (1 + log H/h)^2] for
+!> Dirichlet) and sigma = 1 on Im Q = Im G~^T, at the bottom of that
+!> interval (docs/THEORY.md "Preconditioned MPRGP"). Two projections and one
+!> M^{-1} per application; MPRGP uses it in the face only.
+!>
 !> Stopping test: the projected gradient is (up to the factor 1/s) minus the
 !> constraint violation B u - c of the displacements that the current
 !> multipliers reconstruct (projected on the free rows), row i being
@@ -30,6 +42,7 @@ module dual_problem
   use feti_operators, only: feti_t, local_field_t
   use subdomain, only: subdomain_t
   use reconstruction, only: alpha_new
+  use dual_preconditioner, only: dual_preconditioner_t
   use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX
   implicit none
   private
@@ -48,6 +61,10 @@ module dual_problem
     !> smallest force scale / E of eq_measure: the forces a displacement of the
     !> data's size makes, max_s max|K_s| / E_s x (stop_scale s)
     real(dp), private :: force_floor = 0
+    type(dual_preconditioner_t) :: prec        !< M^{-1} (when use_prec)
+    logical :: use_prec = .false.
+    real(dp) :: prec_q_weight = 1              !< sigma: M_A^{-1} A = sigma on Im Q
+    real(dp), allocatable, private :: wp(:), wq(:), wm(:)
   contains
     procedure :: init
     procedure :: prepare
@@ -63,6 +80,10 @@ module dual_problem
     procedure :: track_step
     procedure :: track_reset
     procedure :: unscaled_multiplier
+    procedure :: set_preconditioner
+    procedure :: has_preconditioner
+    procedure :: precondition
+    procedure :: preconditioner_name
     procedure :: hessian_norm
     procedure :: alpha_bar
     procedure :: free
@@ -149,6 +170,51 @@ contains
     call self%apply_projector(self%fpx, self%pfpx, .false.)
     y = (self%pfpx + self%rho*(x - self%px))/self%scale
   end subroutine hessian
+
+  !> Use M_A^{-1} built on `kind` ('lumped' | 'dirichlet'; 'none': no
+  !> preconditioner) with the subdomain weights w_s (dual_preconditioner).
+  !> After init. Collective.
+  subroutine set_preconditioner(self, kind, weights)
+    class(dual_problem_t), intent(inout) :: self
+    character(len=*), intent(in) :: kind
+    real(dp), intent(in) :: weights(:)
+    call self%prec%free()
+    self%use_prec = kind /= 'none'
+    if (.not. self%use_prec) return
+    call self%op%init_preconditioner(self%prec, kind, weights)
+    if (allocated(self%wp)) deallocate (self%wp, self%wq, self%wm)
+    allocate (self%wp(self%n), self%wq(self%n), self%wm(self%n))
+  end subroutine set_preconditioner
+
+  logical function has_preconditioner(self)
+    class(dual_problem_t), intent(in) :: self
+    has_preconditioner = self%use_prec
+  end function has_preconditioner
+
+  !> 'none', 'lumped' or 'dirichlet'.
+  function preconditioner_name(self) result(name)
+    class(dual_problem_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'none'
+    if (self%use_prec) name = self%prec%kind()
+  end function preconditioner_name
+
+  !> z = M_A^{-1} r = s P M^{-1} P r + (sigma/rho') (r - P r) (see the
+  !> module); the identity without preconditioner.
+  subroutine precondition(self, r, z)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: r(:)
+    real(dp), intent(out) :: z(:)
+    if (.not. self%use_prec) then
+      z(1:self%n) = r(1:self%n)
+      return
+    end if
+    call self%apply_projector(r, self%wp, .false.)
+    self%wq = r(1:self%n) - self%wp
+    call self%prec%apply(self%wp, self%wm)
+    call self%apply_projector(self%wm, self%wp, .false.)
+    z(1:self%n) = self%scale*self%wp + (self%prec_q_weight/self%penalty())*self%wq
+  end subroutine precondition
 
   !> Extra set-up of an extension before b is formed (none here).
   subroutine prepare(self)
@@ -324,6 +390,9 @@ contains
     call self%free_base()
     if (allocated(self%px)) deallocate (self%px, self%fpx, self%pfpx)
     if (allocated(self%last_g)) deallocate (self%last_g, self%last_z, self%x_g, self%x_z)
+    call self%prec%free()
+    self%use_prec = .false.
+    if (allocated(self%wp)) deallocate (self%wp, self%wq, self%wm)
     self%op => null()
   end subroutine free
 end module dual_problem

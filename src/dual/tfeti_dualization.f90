@@ -12,6 +12,7 @@ module tfeti_dualization
   use timers, only: timer_start, timer_stop, timer_seconds
   use params, only: params_t, solver_params_t
   use feti_operators, only: feti_t, local_field_t, feti_sizes_t
+  use subdomain, only: subdomain_t
   use orthonormal_coarse, only: check_orthonormal_size
   use qp_problem, only: qp_problem_t, qp_solver_t
   use smalbe, only: smalbe_settings_t
@@ -53,6 +54,7 @@ module tfeti_dualization
     procedure :: operators
     procedure :: sizes
     procedure :: rho
+    procedure :: preconditioner_name
     procedure :: free
   end type tfeti_dualization_t
 
@@ -99,9 +101,40 @@ contains
     end if
     call this%dual%init(this%op, p%solver%rho_scale, p%solver%stopping)
     call timer_stop('dual setup')
+    if (p%solver%preconditioner /= 'none') then
+      call timer_start('preconditioner setup')
+      call this%dual%set_preconditioner(p%solver%preconditioner, subdomain_weights(p, this%op))
+      call timer_stop('preconditioner setup')
+      call log_message('preconditioner (MPRGP in the face): '//trim(p%solver%preconditioner))
+    end if
     write (line, '(a,es10.3,a,es10.3)') '||P F P|| ~ ', this%op%norm_pfp(), ', rho = ', this%dual%rho
     call log_message(line)
   end subroutine setup
+
+  !> w_s = E_s/young of the local subdomains with &solver scaling = 'young'
+  !> (the weights of the rows of B, constraints), else 1.
+  function subdomain_weights(p, op) result(w)
+    type(params_t), intent(in) :: p
+    type(feti_t), intent(inout), target :: op
+    real(dp), allocatable :: w(:)
+    type(subdomain_t), pointer :: subs(:)
+    integer :: ls
+    subs => op%subdomains()
+    allocate (w(size(subs)))
+    w = 1
+    if (p%solver%scaling == 'young') then
+      do ls = 1, size(subs)
+        w(ls) = subs(ls)%young/p%material%young
+      end do
+    end if
+  end function subdomain_weights
+
+  !> The preconditioner of MPRGP in the face: 'none', 'lumped' or 'dirichlet'.
+  function preconditioner_name(this) result(name)
+    class(tfeti_dualization_t), intent(in) :: this
+    character(len=:), allocatable :: name
+    name = this%dual%preconditioner_name()
+  end function preconditioner_name
 
   !> The dual QP for the solver.
   function problem(this) result(qp)

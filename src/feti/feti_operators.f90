@@ -24,6 +24,7 @@ module feti_operators
   use projector, only: projector_t
   use coarse_problem, only: coarse_problem_t
   use orthonormal_coarse, only: orthonormal_coarse_t
+  use dual_preconditioner, only: dual_preconditioner_t
   use mpi_f08, only: MPI_Comm, MPI_Allreduce, MPI_SUM
   implicit none
   private
@@ -72,6 +73,7 @@ module feti_operators
     procedure :: keyed_random
     procedure :: init_active_coarse
     procedure :: init_orthonormal
+    procedure :: init_preconditioner
     ! accessors
     procedure :: comm
     procedure :: nlocal
@@ -254,6 +256,18 @@ contains
     type(orthonormal_coarse_t), intent(inout) :: orth
     call this%proj%init_orthonormal(this%dec, this%b, orth)
   end subroutine init_orthonormal
+
+  !> The preconditioner M^{-1} = sum_s B_D^s A_s B_D^s^T of `&solver
+  !> preconditioner` ('lumped' | 'dirichlet'), w_s = weights(ls) for the
+  !> local subdomain ls (dual_preconditioner). `this` must be a target and
+  !> outlive `prec`. Collective.
+  subroutine init_preconditioner(this, prec, kind, weights)
+    class(feti_t), intent(inout), target :: this
+    type(dual_preconditioner_t), intent(inout) :: prec
+    character(len=*), intent(in) :: kind
+    real(dp), intent(in) :: weights(:)
+    call prec%init(kind, this%b, this%subs, weights)
+  end subroutine init_preconditioner
 
   ! ---- accessors ----
 

@@ -86,6 +86,8 @@ module params
     !> SMALBE's stopping test: 'violation' (largest constraint violation in
     !> displacement units, relative) | 'norm' (the classical 2-norm test)
     character(len=name_len) :: stopping = 'violation'
+    !> MPRGP preconditioned in the face (and PCPG): 'none' | 'lumped' | 'dirichlet'
+    character(len=name_len) :: preconditioner = 'none'
     logical :: monitor = .true.               !< one line per outer iteration
   end type solver_params_t
 
@@ -470,7 +472,7 @@ contains
                 regularization, active_tol, kkt_tol
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
-                               m_no_step, f_action, f_storage
+                               m_no_step, f_action, f_storage, preconditioner
     character(len=path_len) :: directory
     logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report, coarse_ooc
     namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping
@@ -482,7 +484,7 @@ contains
       m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, power_iterations, coarse, &
       coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
       f_action, f_storage, &
-      regularization, scaling, stopping, monitor
+      regularization, scaling, stopping, preconditioner, monitor
     namelist /reconstruction/ method, active_tol, kkt_tol
     character(len=name_len) :: run_name
     namelist /output/ directory, run_name, write_hdf5, write_report
@@ -528,6 +530,7 @@ contains
         coarse_placement = s%coarse_placement; coarse_ranks = s%coarse_ranks
         coarse_blr = s%coarse_blr; coarse_ooc = s%coarse_ooc
         regularization = s%regularization; scaling = s%scaling; stopping = s%stopping; monitor = s%monitor
+        preconditioner = s%preconditioner
       end associate
       if (reading) read (group_text, nml=solver, iostat=status, iomsg=msg)
       if (.not. reading) write (written, nml=solver, delim='quote', iostat=status, iomsg=msg)
@@ -562,7 +565,8 @@ contains
                                  lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
                                  lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, &
-                                 regularization, lower(scaling), lower(stopping), monitor)
+                                 regularization, lower(scaling), lower(stopping), lower(preconditioner), &
+                                 monitor)
     case ('reconstruction')
       p%reconstruction = reconstruction_params_t(lower(method), active_tol, kkt_tol)
     case ('output')
@@ -658,6 +662,8 @@ contains
         call fail('solver', 'scaling', "must be 'none' or 'young'", s%scaling)
       if (.not. one_of(s%stopping, [character(len=9) :: 'violation', 'norm'])) &
         call fail('solver', 'stopping', "must be 'violation' or 'norm'", s%stopping)
+      if (.not. one_of(s%preconditioner, [character(len=9) :: 'none', 'lumped', 'dirichlet'])) &
+        call fail('solver', 'preconditioner', "must be 'none', 'lumped' or 'dirichlet'", s%preconditioner)
     end associate
     associate (r => p%reconstruction)
       if (.not. one_of(r%method, [character(len=8) :: 'new', 'standard', 'both'])) &

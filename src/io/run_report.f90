@@ -74,6 +74,22 @@ contains
     call js%add_each([character(len=16) :: 'f_applications', 'coarse_solves'], [op%f_applications(), op%coarse_solves()])
     call js%add('variant', solver_variant(p))
     call add_outer_history(js, solver)
+    ! MPRGP in the face: the preconditioner and the condition estimate of the
+    ! operator its CG runs saw (Ritz values of the Lanczos matrices of the CG
+    ! coefficients; null when no run had 2 steps)
+    call js%add('preconditioner', dual%preconditioner_name())
+    call js%add('preconditioner_applications', int(solver%n_preconditioner, i8))
+    associate (rz => solver%inner%ritz)
+      if (rz%n_runs > 0) then
+        call js%add_each([character(len=24) :: 'face_condition_estimate', 'face_ritz_min', 'face_ritz_max'], &
+                         [rz%max_ratio, rz%theta_min, rz%theta_max])
+      else
+        call js%add_null('face_condition_estimate')
+        call js%add_null('face_ritz_min')
+        call js%add_null('face_ritz_max')
+      end if
+      call js%add_each([character(len=16) :: 'cg_runs', 'longest_cg_run'], int([rz%n_runs, rz%longest], i8))
+    end associate
     call js%end_object()
     call js%begin_object('kkt')
     call js%add_each([character(len=16) :: 'equilibrium', 'gluing', 'dirichlet', 'penetration', 'equality', &

@@ -63,6 +63,26 @@
 !> compensated (qp_problem: compensated_add, reduce_sums), so the iterates do
 !> not depend on the number of ranks when the Hessian's result does not.
 !>
+!> Preconditioning in the face (Dostal, "Optimal Quadratic Programming
+!> Algorithms", 2009, Sec. 5.11): when the problem has a preconditioner
+!> (qp_problem: has_preconditioner, precondition), the CG steps use
+!> z = R_F M_A^{-1} R_F g, the preconditioned free gradient restricted to
+!> the free set (0 on the active set), instead of phi: a run of CG steps
+!> starts with p = z, conjugates with beta_cg = z^T A p / p^T A p and
+!> p <- z - beta_cg p. The step length g^T p / p^T A p, the test of
+!> proportionality (phi, beta, phit), the expansion step (along phi, length
+!> alpha_bar) and the proportioning step (along beta), and the stopping test
+!> keep their unpreconditioned forms, so the bounds stay simple. z is
+!> computed only when a CG step follows (lazily after an expansion or
+!> proportioning step): one preconditioner application per CG step.
+!>
+!> Face condition estimate: the step lengths and conjugation coefficients
+!> of every run of consecutive CG steps (between two restarts of p) are a
+!> Lanczos process on the face; `ritz` (ritz_values) keeps the extreme Ritz
+!> values and the largest ratio theta_max/theta_min of a run, over the
+!> calls since the caller reset it (SMALBE: one solve). Without
+!> preconditioner the operator is A on the face, with it R_F M_A^{-1} R_F A.
+!>
 !> Work vectors (5 of the local length) are allocated on the first call and
 !> kept (no allocation in the iteration).
 module mprgp
@@ -70,13 +90,14 @@ module mprgp
   use kinds, only: dp, ip, name_len
   use errors, only: fatal_error
   use logger, only: log_message
+  use ritz_values, only: cg_ritz_t
   use qp_problem, only: qp_problem_t, qp_solver_t, no_lower_bound, compensated_add, qp_status_converged, &
                         qp_status_max_hessian, qp_status_not_finite, qp_status_breakdown, &
                         qp_status_incompatible, qp_status_not_run, qp_message_len
   implicit none
   private
 
-  public :: ensure_size
+  public :: ensure_size, preconditioned_free_gradient
 
   !> A stopping rule asked once per iteration (and at the start) by minimize.
   type, abstract, public :: mprgp_stop_t
@@ -124,6 +145,9 @@ module mprgp
     integer(ip) :: n_norm_updates = 0          !< times the last call raised a_norm to a Rayleigh quotient
     real(dp) :: best_gp_norm = 0               !< smallest ||g^P|| of the last call
     integer(ip) :: n_best = 0                  !< iteration of the last call at which it was reached
+    integer(ip) :: n_preconditioner = 0        !< preconditioner applications of the last call
+    logical :: preconditioned = .false.        !< the last call used the problem's preconditioner
+    type(cg_ritz_t) :: ritz                    !< Ritz values of the CG runs (reset by the caller / solve)
     real(dp), allocatable, private :: p(:), ap(:), w_phi(:), w_x(:), w_g(:)
   contains
     procedure :: init => mprgp_init
@@ -241,6 +265,7 @@ contains
     self%tol_abs = self%tol*norm_b
     if (norm_b <= 0) self%tol_abs = self%tol
     rule%tol_abs = self%tol_abs
+    call self%ritz%reset()
     call self%minimize(problem, problem%b, x, self%gradient, rule, self%max_hessian, .false.)
     if (self%status == qp_status_converged) then
       write (buf, '(a,es10.3,a,es10.3,a)') 'converged: ||g^P|| = ', self%gp_norm, ' <= ', self%tol_abs, &
@@ -266,7 +291,7 @@ contains
     integer(ip), intent(in) :: max_hessian
     logical, intent(in) :: gradient_given
     real(dp) :: stats(4), gp, alpha_f, alpha_cg, beta_cg, pap
-    logical :: stop
+    logical :: stop, restart
     integer(ip) :: n
 
     n = problem%n
@@ -285,6 +310,8 @@ contains
     self%best_gp_norm = huge(1.0_dp)
     self%n_best = 0
     self%n_norm_updates = 0
+    self%n_preconditioner = 0
+    self%preconditioned = problem%has_preconditioner()
     self%status = qp_status_not_run
     self%message = ''
 
@@ -300,6 +327,7 @@ contains
     end if
     call gradient_part(problem, x, g, .false., self%p)
     call split_stats(self, problem, x, g, stats)
+    restart = .true.
 
     do
       gp = sqrt(stats(1) + stats(2))
@@ -323,25 +351,44 @@ contains
       end if
 
       if (stats(2) <= self%gamma**2*stats(3)) then
-        ! proportional iterate: try a CG step along p
+        ! proportional iterate: try a CG step along p (a new run: p = phi, or z)
+        if (restart) then
+          if (self%preconditioned) call free_direction(self, problem, x, g, self%p)
+          call self%ritz%begin_run()
+          restart = .false.
+        end if
         alpha_f = feasible_step(problem, x, self%p)
         if (.not. step_along_p(self, problem, g, .not. ieee_is_nan(alpha_f), 'p', &
                                'p^T A p, g^T p or the feasible step', 'CG', pap, alpha_cg)) exit
+        call self%ritz%add_alpha(alpha_cg)
 
         if (alpha_cg <= alpha_f) then
           ! CG step, then p <- phi - beta_cg p with beta_cg = phi^T A p / p^T A p
+          ! (preconditioned: p <- z - beta_cg p, beta_cg = z^T A p / p^T A p)
           call take_step(problem, x, g, alpha_cg, self%p, self%ap)
           call problem%track_step(alpha_cg)
-          call split_stats(self, problem, x, g, stats, self%ap)
+          if (self%preconditioned) then
+            call free_direction(self, problem, x, g, self%w_phi)
+            call split_stats(self, problem, x, g, stats, self%ap, self%w_phi)
+          else
+            call split_stats(self, problem, x, g, stats, self%ap)
+          end if
           beta_cg = stats(4)/pap
           if (.not. ieee_is_finite(beta_cg)) then
             call set_status(self, qp_status_not_finite, 'non-finite CG orthogonalization coefficient', &
                             self%n_iterations)
             exit
           end if
-          call conjugate(problem, x, g, beta_cg, self%p)
+          call self%ritz%add_beta(-beta_cg)
+          if (self%preconditioned) then
+            call conjugate(problem, x, self%w_phi, beta_cg, self%p)
+          else
+            call conjugate(problem, x, g, beta_cg, self%p)
+          end if
           self%n_cg = self%n_cg + 1
         else
+          restart = .true.
+          call self%ritz%end_run()
           ! expansion step: half step to the boundary, then the projected gradient step
           call take_step(problem, x, g, alpha_f, self%p, self%ap)
           call problem%track_step(alpha_f)
@@ -353,6 +400,8 @@ contains
         end if
       else
         ! proportioning step along beta
+        restart = .true.
+        call self%ritz%end_run()
         call gradient_part(problem, x, g, .true., self%p)
         if (.not. step_along_p(self, problem, g, .true., 'beta', 'beta^T A beta or g^T beta', 'proportioning', &
                                pap, alpha_cg)) exit
@@ -364,7 +413,34 @@ contains
       end if
       self%n_iterations = self%n_iterations + 1
     end do
+    call self%ritz%end_run()
   end subroutine minimize
+
+  !> v = R_F M_A^{-1} R_F g: the problem's preconditioner applied to the free
+  !> gradient phi, restricted to the free set (0 where x_i is at its bound).
+  subroutine free_direction(self, problem, x, g, v)
+    class(mprgp_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(in) :: x(:), g(:)
+    real(dp), intent(inout) :: v(:)
+    call preconditioned_free_gradient(problem, x, g, self%w_g, v)
+    self%n_preconditioner = self%n_preconditioner + 1
+  end subroutine free_direction
+
+  !> z = R_F M_A^{-1} R_F g at x: phi (into `work`), the problem's
+  !> preconditioner applied to it, and z_i = 0 where x_i is at its bound.
+  !> Collective.
+  subroutine preconditioned_free_gradient(problem, x, g, work, z)
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(in) :: x(:), g(:)
+    real(dp), intent(inout) :: work(:), z(:)
+    integer(ip) :: i
+    call gradient_part(problem, x, g, .false., work)
+    call problem%precondition(work, z)
+    do i = 1, problem%n
+      if (.not. x(i) > problem%lower(i)) z(i) = 0
+    end do
+  end subroutine preconditioned_free_gradient
 
   !> Second half of an expansion step, from the half step x (at the
   !> boundary) with gradient g: x <- P(x - alpha_e phi(x)), g recomputed.
@@ -548,7 +624,8 @@ contains
     end do
   end subroutine gradient_part
 
-  !> p <- phi(x) - beta_cg p.
+  !> p <- phi(x) - beta_cg p (g the gradient; or z - beta_cg p with z the
+  !> restricted preconditioned gradient in place of g).
   subroutine conjugate(problem, x, g, beta_cg, p)
     class(qp_problem_t), intent(in) :: problem
     real(dp), intent(in) :: x(:), g(:), beta_cg
@@ -564,14 +641,15 @@ contains
   end subroutine conjugate
 
   !> Global [phi^T phi, beta^T beta, phit^T phi, phi^T v] in one reduction
-  !> (the last entry 0 without v). phit uses alpha_bar; it is formed without
-  !> dividing by alpha_bar unless the result is below phi_i (no overflow).
-  subroutine split_stats(self, problem, x, g, stats, v)
+  !> (the last entry 0 without v; with z, z^T v over the free set instead).
+  !> phit uses alpha_bar; it is formed without dividing by alpha_bar unless
+  !> the result is below phi_i (no overflow).
+  subroutine split_stats(self, problem, x, g, stats, v, z)
     class(mprgp_t), intent(in) :: self
     class(qp_problem_t), intent(in) :: problem
     real(dp), intent(in) :: x(:), g(:)
     real(dp), intent(out) :: stats(4)
-    real(dp), intent(in), optional :: v(:)
+    real(dp), intent(in), optional :: v(:), z(:)
     real(dp) :: gi, d, abar, hi(4), lo(4)
     integer(ip) :: i
 
@@ -596,7 +674,11 @@ contains
         call compensated_add(hi(2), lo(2), gi*gi)
       end if
     end do
-    if (present(v)) then
+    if (present(v) .and. present(z)) then
+      do i = 1, problem%n
+        if (x(i) > problem%lower(i)) call compensated_add(hi(4), lo(4), z(i)*v(i))
+      end do
+    else if (present(v)) then
       do i = 1, problem%n
         if (x(i) > problem%lower(i)) call compensated_add(hi(4), lo(4), g(i)*v(i))
       end do

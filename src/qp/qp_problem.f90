@@ -23,6 +23,11 @@
 !>
 !> Every type-bound procedure is collective over `comm` unless stated otherwise.
 !>
+!> Preconditioner (optional): a problem whose `has_preconditioner()` is true
+!> provides `precondition(r, z)`, z = M_A^{-1} r with M_A^{-1} symmetric
+!> positive definite (an approximate inverse of A); MPRGP then uses it in the
+!> face (its CG steps; mprgp). The QP layer knows nothing else of it.
+!>
 !> Stopping test (what the solvers compare with tol): by default the classical
 !> ||g^P|| <= tol ||b|| and ||C x|| <= tol ||b|| in the 2-norm. A problem that
 !> allocates `stop_weight` (w_i > 0, local slice) asks instead for a test per
@@ -104,6 +109,8 @@ module qp_problem
     procedure :: track_step => default_track_step
     procedure :: track_reset => default_track
     procedure :: eq_measure => default_eq_measure
+    procedure :: has_preconditioner => default_has_preconditioner
+    procedure :: precondition => default_precondition
     procedure :: init_base
     procedure :: free_base
     procedure :: dot
@@ -247,6 +254,22 @@ contains
     real(dp), intent(in) :: cnorm
     default_eq_measure = cnorm
   end function default_eq_measure
+
+  !> False: no preconditioner (MPRGP's CG steps use the free gradient).
+  !> Local, no communication.
+  logical function default_has_preconditioner(self)
+    class(qp_problem_t), intent(in) :: self
+    default_has_preconditioner = .false.
+    if (self%n < 0) default_has_preconditioner = .true.   ! never: keeps self referenced
+  end function default_has_preconditioner
+
+  !> z = M_A^{-1} r (local slices; collective): the identity by default.
+  subroutine default_precondition(self, r, z)
+    class(qp_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: r(:)
+    real(dp), intent(out) :: z(:)
+    z(1:self%n) = r(1:self%n)
+  end subroutine default_precondition
 
   !> Optional bookkeeping of C x that a problem may keep so that eq_residual
   !> needs no new work: the solver calls track_last when x has become the

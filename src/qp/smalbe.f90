@@ -173,6 +173,8 @@ module smalbe
     integer(ip) :: n_no_step = 0               !< inner solves that made no step
     integer(ip) :: n_norm_updates = 0          !< times the inner MPRGP raised its ||A|| estimate
     integer(ip) :: n_active = 0                !< components at their bound at the returned x
+    integer(ip) :: n_preconditioner = 0        !< preconditioner applications in all (MPRGP in the face)
+    logical :: preconditioned = .false.        !< the inner MPRGP used the problem's preconditioner
     !> per outer iteration k of the last solve: ||C x_k|| after the inner solve
     !> and the Hessian multiplications so far (report.json: the contraction
     !> ||C x_k|| / ||C x_(k-1)|| and the products per outer iteration)
@@ -393,6 +395,8 @@ contains
 
     self%rho = problem%penalty()
     self%rho_initial = self%rho
+    self%preconditioned = problem%has_preconditioner()
+    call self%inner%ritz%reset()
     if (self%rho > self%inner%a_norm) then
       self%inner%a_norm = self%rho
       self%inner%alpha_bar = self%inner%alpha_scale/self%inner%a_norm
@@ -456,6 +460,7 @@ contains
       self%n_proportioning = self%n_proportioning + self%inner%n_proportioning
       self%n_expansion_fallback = self%n_expansion_fallback + self%inner%n_expansion_fallback
       self%n_norm_updates = self%n_norm_updates + self%inner%n_norm_updates
+      self%n_preconditioner = self%n_preconditioner + self%inner%n_preconditioner
       self%gp_norm = self%inner%gp_norm
       if (self%inner%status /= qp_status_converged .and. self%inner%status /= qp_status_max_hessian) then
         self%status = self%inner%status
@@ -656,6 +661,7 @@ contains
     self%n_rho_updates = 0
     self%n_norm_updates = 0
     self%n_active = 0
+    self%n_preconditioner = 0
     self%cnorm_history = [real(dp) ::]
     self%hessian_history = [integer(ip) ::]
   end subroutine reset_counters
@@ -704,6 +710,13 @@ contains
     write (buf, '(a,es10.3,a,es10.3,a,i0,a)') '  rho ', self%rho_initial, ' -> ', self%rho, ' (raised ', &
       self%n_rho_updates, ' times)'
     call log_message(buf)
+    if (self%inner%ritz%n_runs > 0) then
+      write (buf, '(a,l1,a,i0,a,es10.3,a,es10.3,a,es10.3,a,i0,a,i0)') '  preconditioned ', self%preconditioned, &
+        ' (applications ', self%n_preconditioner, '), face condition estimate ', self%inner%ritz%max_ratio, &
+        ' (Ritz values ', self%inner%ritz%theta_min, ' .. ', self%inner%ritz%theta_max, '; CG runs ', &
+        self%inner%ritz%n_runs, ', longest ', self%inner%ritz%longest
+      call log_message(trim(buf)//')')
+    end if
     if (self%n_norm_updates > 0) then
       write (buf, '(a,es10.3,a,es10.3,a,i0,a)') '  ||A|| estimate raised from ', self%a_norm, ' to ', &
         self%inner%a_norm, ' by Rayleigh quotients of the search directions (', self%n_norm_updates, ' times)'
