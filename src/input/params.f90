@@ -87,7 +87,7 @@ module params
     !> displacement units, relative) | 'norm' (the classical 2-norm test)
     character(len=name_len) :: stopping = 'violation'
     !> MPRGP preconditioned in the face (and PCPG): 'none' | 'lumped' | 'dirichlet'
-    character(len=name_len) :: preconditioner = 'none'
+    character(len=name_len) :: preconditioner = 'lumped'
     logical :: monitor = .true.               !< one line per outer iteration
   end type solver_params_t
 
