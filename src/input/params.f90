@@ -68,6 +68,8 @@ module params
     character(len=name_len) :: m_no_step = 'cut'
     real(dp) :: rho_growth = 1                !< adaptive rho: factor (1: rho constant)
     real(dp) :: rho_contraction = 0.5_dp      !< raise rho when ||C x|| shrinks by less than this per outer
+    !> outer iterations over which that contraction is measured (geometric mean), and between two raises
+    integer(ip) :: rho_window = 1
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| power method
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
@@ -465,7 +467,8 @@ contains
     character(len=*), intent(in), optional :: group_text
     character(len=*), intent(out), optional :: written(:)
     logical :: reading
-    integer(ip) :: nsub(3), nel(3), distortion_seed, seed, max_outer, max_hessian, power_iterations, coarse_ranks
+    integer(ip) :: nsub(3), nel(3), distortion_seed, seed, max_outer, max_hessian, power_iterations, coarse_ranks, &
+                   rho_window
     real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, rho_growth, &
                 rho_contraction, coarse_blr, &
@@ -481,7 +484,7 @@ contains
     namelist /boundary/ top_dirichlet, top_displacement, symmetry_x0, symmetry_y0
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
-      m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, power_iterations, coarse, &
+      m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, rho_window, power_iterations, coarse, &
       coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
       f_action, f_storage, &
       regularization, scaling, stopping, preconditioner, monitor
@@ -523,7 +526,7 @@ contains
         tol = s%tol; max_outer = s%max_outer; max_hessian = s%max_hessian; gamma = s%gamma
         alpha_scale = s%alpha_scale; expansion = s%expansion; rho_scale = s%rho_scale
         m_scale = s%m_scale; beta = s%beta; eta_scale = s%eta_scale; m_no_step = s%m_no_step
-        rho_growth = s%rho_growth; rho_contraction = s%rho_contraction
+        rho_growth = s%rho_growth; rho_contraction = s%rho_contraction; rho_window = s%rho_window
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
         f_action = s%f_action; f_storage = s%f_storage
@@ -561,7 +564,7 @@ contains
     case ('solver')
       p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
                                  rho_scale, m_scale, beta, eta_scale, lower(m_no_step), rho_growth, &
-                                 rho_contraction, power_iterations, &
+                                 rho_contraction, rho_window, power_iterations, &
                                  lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
                                  lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, &
@@ -634,6 +637,7 @@ contains
       if (.not. s%rho_growth >= 1) call fail('solver', 'rho_growth', 'must be >= 1', reals([s%rho_growth]))
       if (.not. (s%rho_contraction > 0 .and. s%rho_contraction < 1)) &
         call fail('solver', 'rho_contraction', 'must be in (0, 1)', reals([s%rho_contraction]))
+      if (s%rho_window < 1) call fail('solver', 'rho_window', 'must be >= 1', ints([s%rho_window]))
       if (s%power_iterations < 1) &
         call fail('solver', 'power_iterations', 'must be >= 1', ints([s%power_iterations]))
       if (.not. one_of(s%coarse, [character(len=8) :: 'mumps', 'cholesky'])) &

@@ -239,6 +239,7 @@ contains
     end do
     call js%add('cnorm_per_outer', c)
     call js%add('hessian_per_outer', h)
+    if (allocated(solver%rho_history)) call js%add('rho_per_outer', solver%rho_history)
     call js%add('contraction_per_outer', q)
     if (nq > 0) then
       sorted = q

@@ -31,7 +31,8 @@
 !>    (`m_no_step`: what an inner solve without a step does to M, see step 4
 !>    in smalbe_solve.)
 !> 5. optional adaptive penalty (rho_growth > 1): rho <- rho_growth rho when
-!>    ||C x_k|| > rho_contraction ||C x_{k-1}||, at most smalbe_rho_cap rho_0;
+!>    ||C x_k|| > rho_contraction^w ||C x_{k-w}|| (w = rho_window, and at
+!>    least w outer iterations after the last raise), at most smalbe_rho_cap rho_0;
 !>    the problem's Hessian follows through problem%set_penalty (see step 5 in
 !>    smalbe_solve). Off by default: measured in docs/RESULTS.md "Outer loop
 !>    (issue 14, item 1)".
@@ -62,8 +63,9 @@
 !> total (inner solves get the remaining budget); either ends the solve with a
 !> "not converged" status and a message, as do NaN/Inf (qp_status_not_finite).
 !>
-!> History: cnorm_history(k) = ||C x_k|| and hessian_history(k) = Hessian
-!> multiplications after outer iteration k (the SMALBE monitor's columns).
+!> History: cnorm_history(k) = ||C x_k||, hessian_history(k) = Hessian
+!> multiplications after outer iteration k and rho_history(k) = the penalty of
+!> its inner solve (the SMALBE monitor's columns).
 !>
 !> Monitor (monitor = .true., rank 0 through module logger): a header with
 !> rho, ||A||, M_0, eta, tol ||b||; one line per outer iteration: outer
@@ -121,10 +123,12 @@ module smalbe
     !> 'temporary' (only the next inner solve uses beta M, beta^2 M, ... while
     !> the solves make no step) or 'keep' (SMALBE-M's theory: nothing)
     character(len=name_len) :: m_no_step = 'cut'
-    !> adaptive penalty: rho <- rho_growth rho when ||C x_k|| > rho_contraction
-    !> ||C x_{k-1}|| after an inner solve that made a step (1: rho constant)
+    !> adaptive penalty: rho <- rho_growth rho when ||C x_k|| > rho_contraction^w
+    !> ||C x_{k-w}|| (w = rho_window) after an inner solve that made a step, at
+    !> least w outer iterations after the last raise (rho_growth 1: rho constant)
     real(dp) :: rho_growth = 1
     real(dp) :: rho_contraction = 0.5_dp
+    integer(ip) :: rho_window = 1
     logical :: monitor = .false.               !< one line per outer iteration and a summary
   end type smalbe_settings_t
 
@@ -143,6 +147,7 @@ module smalbe
     character(len=name_len) :: m_no_step = 'cut'  !< 'cut' | 'temporary' | 'keep' (see smalbe_settings_t)
     real(dp) :: rho_growth = 1                 !< adaptive penalty factor (1: off; see smalbe_settings_t)
     real(dp) :: rho_contraction = 0.5_dp       !< raise rho when ||C x|| shrinks by less than this
+    integer(ip) :: rho_window = 1              !< ... per outer iteration over this many (see smalbe_settings_t)
     real(dp) :: rho_initial = 0                !< problem%penalty() at the start of the last solve
     integer(ip) :: n_rho_updates = 0           !< times rho was raised
     integer(ip) :: max_outer = 200             !< cap of outer iterations
@@ -180,6 +185,7 @@ module smalbe
     !> ||C x_k|| / ||C x_(k-1)|| and the products per outer iteration)
     real(dp), allocatable :: cnorm_history(:)
     integer(ip), allocatable :: hessian_history(:)
+    real(dp), allocatable :: rho_history(:)    !< the penalty of outer iteration k's inner solve
     real(dp), allocatable, private :: b_lin(:), ct_mu(:), ct_new(:), x_prev(:), g_prev(:)
     type(smalbe_inner_stop_t), private :: rule
   contains
@@ -266,13 +272,14 @@ contains
   !> m_scale > 0 (default 100), beta in (0, 1) (default 0.5), eta_scale > 0
   !> (default 0.1); monitor: one line per outer iteration and a summary.
   subroutine smalbe_init(self, a_norm, tol, max_outer, max_hessian, gamma, alpha_scale, expansion, &
-                         m_scale, beta, eta_scale, monitor, m_no_step, rho_growth, rho_contraction)
+                         m_scale, beta, eta_scale, monitor, m_no_step, rho_growth, rho_contraction, rho_window)
     class(smalbe_t), intent(inout) :: self
     real(dp), intent(in) :: a_norm, tol
     integer(ip), intent(in) :: max_outer, max_hessian
     real(dp), intent(in), optional :: gamma, alpha_scale, m_scale, beta, eta_scale, rho_growth, rho_contraction
     character(len=*), intent(in), optional :: expansion, m_no_step
     logical, intent(in), optional :: monitor
+    integer(ip), intent(in), optional :: rho_window
 
     call self%free()
     call self%inner%init(a_norm, tol, max_hessian, gamma, alpha_scale, expansion, monitor=.false.)
@@ -294,6 +301,8 @@ contains
     if (present(rho_growth)) self%rho_growth = rho_growth
     self%rho_contraction = 0.5_dp
     if (present(rho_contraction)) self%rho_contraction = rho_contraction
+    self%rho_window = 1
+    if (present(rho_window)) self%rho_window = rho_window
 
     if (.not. (tol > 0 .and. tol < 1)) call fatal_error('smalbe: tol must be in (0, 1)')
     if (max_outer < 1) call fatal_error('smalbe: max_outer must be >= 1')
@@ -309,6 +318,7 @@ contains
     if (.not. (self%rho_growth >= 1)) call fatal_error('smalbe: rho_growth must be >= 1')
     if (.not. (self%rho_contraction > 0 .and. self%rho_contraction < 1)) &
       call fatal_error('smalbe: rho_contraction must be in (0, 1)')
+    if (self%rho_window < 1) call fatal_error('smalbe: rho_window must be >= 1')
   end subroutine smalbe_init
 
   !> The settings `s` at once, with ||A|| = a_norm (penalty included).
@@ -317,7 +327,8 @@ contains
     type(smalbe_settings_t), intent(in) :: s
     real(dp), intent(in) :: a_norm
     call self%init(a_norm, s%tol, s%max_outer, s%max_hessian, s%gamma, s%alpha_scale, s%expansion, &
-                   s%m_scale, s%beta, s%eta_scale, s%monitor, s%m_no_step, s%rho_growth, s%rho_contraction)
+                   s%m_scale, s%beta, s%eta_scale, s%monitor, s%m_no_step, s%rho_growth, s%rho_contraction, &
+                   s%rho_window)
   end subroutine smalbe_init_with
 
   subroutine smalbe_free(self)
@@ -370,9 +381,9 @@ contains
     class(qp_problem_t), intent(inout) :: problem
     real(dp), intent(inout) :: x(:)
     character(len=qp_message_len) :: reason, buf
-    real(dp) :: scale, lagr, change, cnorm_prev, m_now, s(2), hi(2), lo(2), l_shift, rho_old
-    integer(ip) :: n, m, outer, i, n_idle
-    logical :: gradient_given, failed
+    real(dp) :: scale, lagr, change, m_now, s(2), hi(2), lo(2), l_shift, rho_old
+    integer(ip) :: n, m, outer, i, n_idle, last_raise, w
+    logical :: gradient_given, failed, raise
 
     call reset_counters(self)
     if (.not. self%is_compatible(problem, reason)) then
@@ -436,9 +447,10 @@ contains
     self%rule%rho = self%rho
     self%rule%eta = self%eta
     self%rule%n_eq_residual = 0
-    cnorm_prev = 0
     l_shift = 0
     n_idle = 0
+    last_raise = 0
+    w = self%rho_window
     gradient_given = .false.
     if (self%monitor) call monitor_header(self)
 
@@ -475,6 +487,7 @@ contains
       self%cnorm = self%rule%cnorm
       self%cnorm_history = [self%cnorm_history, self%cnorm]
       self%hessian_history = [self%hessian_history, self%n_hessian]
+      self%rho_history = [self%rho_history, self%rho]
       ! the outer criterion's measures at the final x: from the rule when its
       ! last evaluation belongs to this x and got that far, else now
       if (.not. (self%inner%status == qp_status_converged .and. self%rule%evaluated .and. &
@@ -561,16 +574,20 @@ contains
       end if
 
       ! 5. adaptive penalty: when ||C x|| shrank by less than rho_contraction
-      ! after an inner solve that made a step, rho <- rho_growth rho (at most
-      ! smalbe_rho_cap rho_0). A gains (rho - rho_old) C^T C, so does the
+      ! per outer iteration over the last w = rho_window ones (||C x_k|| >
+      ! rho_contraction^w ||C x_{k-w}||; w = 1: the last one), at least w outer
+      ! iterations after the last raise and after an inner solve that made a
+      ! step, rho <- rho_growth rho (at most smalbe_rho_cap rho_0). A gains (rho - rho_old) C^T C, so does the
       ! gradient at x_k (no Hessian product: C^T C x = eq_apply_t(z)); the
       ! inner ||A|| estimate becomes max(||A||, rho) (A_0 and C^T C act on
       ! complementary subspaces), and alpha_bar follows. L(x_k, mu_{k+1}) grows
       ! by (rho - rho_old)/2 ||C x_k||^2, which the next test of 4. includes.
       l_shift = self%rho*self%cnorm**2
-      if (self%rho_growth > 1 .and. outer > 1 .and. self%inner%n_iterations > 0 .and. &
-          self%cnorm > self%rho_contraction*cnorm_prev .and. &
-          self%rho_growth*self%rho <= smalbe_rho_cap*self%rho_initial*(1 + 1.0e-12_dp)) then
+      raise = self%rho_growth > 1 .and. outer > w .and. outer - last_raise >= w .and. &
+              self%inner%n_iterations > 0 .and. &
+              self%rho_growth*self%rho <= smalbe_rho_cap*self%rho_initial*(1 + 1.0e-12_dp)
+      if (raise) raise = self%cnorm > self%rho_contraction**w*self%cnorm_history(outer - w)
+      if (raise) then
         rho_old = self%rho
         self%rho = self%rho_growth*self%rho
         call problem%set_penalty(self%rho)
@@ -585,8 +602,8 @@ contains
           self%inner%alpha_bar = self%inner%alpha_scale/self%inner%a_norm
         end if
         self%n_rho_updates = self%n_rho_updates + 1
+        last_raise = outer
       end if
-      cnorm_prev = self%cnorm
     end do
     self%n_eq_residual = self%rule%n_eq_residual
     self%n_active = problem%count_at_bound(x)
@@ -664,6 +681,7 @@ contains
     self%n_preconditioner = 0
     self%cnorm_history = [real(dp) ::]
     self%hessian_history = [integer(ip) ::]
+    self%rho_history = [real(dp) ::]
   end subroutine reset_counters
 
   subroutine monitor_header(self)
