@@ -70,6 +70,8 @@ module params
     real(dp) :: rho_contraction = 0.5_dp      !< raise rho when ||C x|| shrinks by less than this per outer
     !> outer iterations over which that contraction is measured (geometric mean), and between two raises
     integer(ip) :: rho_window = 1
+    !> > 0: the first raise only on a stall (contraction worse than this over rho_window), later ones per iteration
+    real(dp) :: rho_stall = 0
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| power method
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
@@ -471,7 +473,7 @@ contains
                    rho_window
     real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, rho_growth, &
-                rho_contraction, coarse_blr, &
+                rho_contraction, rho_stall, coarse_blr, &
                 regularization, active_tol, kkt_tol
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
@@ -484,7 +486,7 @@ contains
     namelist /boundary/ top_dirichlet, top_displacement, symmetry_x0, symmetry_y0
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
-      m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, rho_window, power_iterations, coarse, &
+      m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, rho_window, rho_stall, power_iterations, coarse, &
       coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
       f_action, f_storage, &
       regularization, scaling, stopping, preconditioner, monitor
@@ -527,6 +529,7 @@ contains
         alpha_scale = s%alpha_scale; expansion = s%expansion; rho_scale = s%rho_scale
         m_scale = s%m_scale; beta = s%beta; eta_scale = s%eta_scale; m_no_step = s%m_no_step
         rho_growth = s%rho_growth; rho_contraction = s%rho_contraction; rho_window = s%rho_window
+        rho_stall = s%rho_stall
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
         f_action = s%f_action; f_storage = s%f_storage
@@ -564,7 +567,7 @@ contains
     case ('solver')
       p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
                                  rho_scale, m_scale, beta, eta_scale, lower(m_no_step), rho_growth, &
-                                 rho_contraction, rho_window, power_iterations, &
+                                 rho_contraction, rho_window, rho_stall, power_iterations, &
                                  lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
                                  lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, &
@@ -638,6 +641,8 @@ contains
       if (.not. (s%rho_contraction > 0 .and. s%rho_contraction < 1)) &
         call fail('solver', 'rho_contraction', 'must be in (0, 1)', reals([s%rho_contraction]))
       if (s%rho_window < 1) call fail('solver', 'rho_window', 'must be >= 1', ints([s%rho_window]))
+      if (.not. (s%rho_stall >= 0 .and. s%rho_stall < 1)) &
+        call fail('solver', 'rho_stall', 'must be in [0, 1) (0: off)', reals([s%rho_stall]))
       if (s%power_iterations < 1) &
         call fail('solver', 'power_iterations', 'must be >= 1', ints([s%power_iterations]))
       if (.not. one_of(s%coarse, [character(len=8) :: 'mumps', 'cholesky'])) &

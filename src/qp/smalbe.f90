@@ -129,6 +129,10 @@ module smalbe
     real(dp) :: rho_growth = 1
     real(dp) :: rho_contraction = 0.5_dp
     integer(ip) :: rho_window = 1
+    !> > 0: a stall detector for the first raise only: ||C x_k|| >
+    !> rho_stall^w ||C x_{k-w}||; after it the per-iteration test with
+    !> rho_contraction (w = 1). 0: every raise uses rho_contraction and w
+    real(dp) :: rho_stall = 0
     logical :: monitor = .false.               !< one line per outer iteration and a summary
   end type smalbe_settings_t
 
@@ -148,6 +152,7 @@ module smalbe
     real(dp) :: rho_growth = 1                 !< adaptive penalty factor (1: off; see smalbe_settings_t)
     real(dp) :: rho_contraction = 0.5_dp       !< raise rho when ||C x|| shrinks by less than this
     integer(ip) :: rho_window = 1              !< ... per outer iteration over this many (see smalbe_settings_t)
+    real(dp) :: rho_stall = 0                  !< > 0: first raise on a stall only (see smalbe_settings_t)
     real(dp) :: rho_initial = 0                !< problem%penalty() at the start of the last solve
     integer(ip) :: n_rho_updates = 0           !< times rho was raised
     integer(ip) :: max_outer = 200             !< cap of outer iterations
@@ -272,11 +277,13 @@ contains
   !> m_scale > 0 (default 100), beta in (0, 1) (default 0.5), eta_scale > 0
   !> (default 0.1); monitor: one line per outer iteration and a summary.
   subroutine smalbe_init(self, a_norm, tol, max_outer, max_hessian, gamma, alpha_scale, expansion, &
-                         m_scale, beta, eta_scale, monitor, m_no_step, rho_growth, rho_contraction, rho_window)
+                         m_scale, beta, eta_scale, monitor, m_no_step, rho_growth, rho_contraction, rho_window, &
+                         rho_stall)
     class(smalbe_t), intent(inout) :: self
     real(dp), intent(in) :: a_norm, tol
     integer(ip), intent(in) :: max_outer, max_hessian
-    real(dp), intent(in), optional :: gamma, alpha_scale, m_scale, beta, eta_scale, rho_growth, rho_contraction
+    real(dp), intent(in), optional :: gamma, alpha_scale, m_scale, beta, eta_scale, rho_growth, rho_contraction, &
+                                      rho_stall
     character(len=*), intent(in), optional :: expansion, m_no_step
     logical, intent(in), optional :: monitor
     integer(ip), intent(in), optional :: rho_window
@@ -303,6 +310,8 @@ contains
     if (present(rho_contraction)) self%rho_contraction = rho_contraction
     self%rho_window = 1
     if (present(rho_window)) self%rho_window = rho_window
+    self%rho_stall = 0
+    if (present(rho_stall)) self%rho_stall = rho_stall
 
     if (.not. (tol > 0 .and. tol < 1)) call fatal_error('smalbe: tol must be in (0, 1)')
     if (max_outer < 1) call fatal_error('smalbe: max_outer must be >= 1')
@@ -319,6 +328,7 @@ contains
     if (.not. (self%rho_contraction > 0 .and. self%rho_contraction < 1)) &
       call fatal_error('smalbe: rho_contraction must be in (0, 1)')
     if (self%rho_window < 1) call fatal_error('smalbe: rho_window must be >= 1')
+    if (.not. (self%rho_stall >= 0 .and. self%rho_stall < 1)) call fatal_error('smalbe: rho_stall must be in [0, 1)')
   end subroutine smalbe_init
 
   !> The settings `s` at once, with ||A|| = a_norm (penalty included).
@@ -328,7 +338,7 @@ contains
     real(dp), intent(in) :: a_norm
     call self%init(a_norm, s%tol, s%max_outer, s%max_hessian, s%gamma, s%alpha_scale, s%expansion, &
                    s%m_scale, s%beta, s%eta_scale, s%monitor, s%m_no_step, s%rho_growth, s%rho_contraction, &
-                   s%rho_window)
+                   s%rho_window, s%rho_stall)
   end subroutine smalbe_init_with
 
   subroutine smalbe_free(self)
@@ -381,7 +391,7 @@ contains
     class(qp_problem_t), intent(inout) :: problem
     real(dp), intent(inout) :: x(:)
     character(len=qp_message_len) :: reason, buf
-    real(dp) :: scale, lagr, change, m_now, s(2), hi(2), lo(2), l_shift, rho_old
+    real(dp) :: scale, lagr, change, m_now, q, s(2), hi(2), lo(2), l_shift, rho_old
     integer(ip) :: n, m, outer, i, n_idle, last_raise, w
     logical :: gradient_given, failed, raise
 
@@ -583,10 +593,17 @@ contains
       ! complementary subspaces), and alpha_bar follows. L(x_k, mu_{k+1}) grows
       ! by (rho - rho_old)/2 ||C x_k||^2, which the next test of 4. includes.
       l_shift = self%rho*self%cnorm**2
+      ! rho_stall > 0: the first raise needs a stall (windowed test with
+      ! rho_stall), the later ones the per-iteration test with rho_contraction
+      q = self%rho_contraction
+      if (self%rho_stall > 0) then
+        w = merge(self%rho_window, 1_ip, self%n_rho_updates == 0)
+        if (self%n_rho_updates == 0) q = self%rho_stall
+      end if
       raise = self%rho_growth > 1 .and. outer > w .and. outer - last_raise >= w .and. &
               self%inner%n_iterations > 0 .and. &
               self%rho_growth*self%rho <= smalbe_rho_cap*self%rho_initial*(1 + 1.0e-12_dp)
-      if (raise) raise = self%cnorm > self%rho_contraction**w*self%cnorm_history(outer - w)
+      if (raise) raise = self%cnorm > q**w*self%cnorm_history(outer - w)
       if (raise) then
         rho_old = self%rho
         self%rho = self%rho_growth*self%rho
