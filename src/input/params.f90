@@ -66,12 +66,16 @@ module params
     real(dp) :: eta_scale = 0.1_dp            !< inner precision eta = eta_scale ||b||
     !> M after an inner solve that made no step: 'cut' | 'temporary' | 'keep'
     character(len=name_len) :: m_no_step = 'cut'
-    real(dp) :: rho_growth = 1                !< adaptive rho: factor (1: rho constant)
+    !> adaptive rho (docs/RESULTS.md "Outer loop with the preconditioner"): by
+    !> default rho is raised only once the outer loop stalls (contraction of
+    !> ||C x|| worse than rho_stall per outer iteration over rho_window of them),
+    !> then per iteration while ||C x|| shrinks by less than rho_contraction
+    real(dp) :: rho_growth = 2                !< adaptive rho: factor (1: rho constant)
     real(dp) :: rho_contraction = 0.5_dp      !< raise rho when ||C x|| shrinks by less than this per outer
     !> outer iterations over which that contraction is measured (geometric mean), and between two raises
-    integer(ip) :: rho_window = 1
+    integer(ip) :: rho_window = 10
     !> > 0: the first raise only on a stall (contraction worse than this over rho_window), later ones per iteration
-    real(dp) :: rho_stall = 0
+    real(dp) :: rho_stall = 0.95_dp
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| power method
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'

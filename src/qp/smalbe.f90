@@ -34,8 +34,9 @@
 !>    ||C x_k|| > rho_contraction^w ||C x_{k-w}|| (w = rho_window, and at
 !>    least w outer iterations after the last raise), at most smalbe_rho_cap rho_0;
 !>    the problem's Hessian follows through problem%set_penalty (see step 5 in
-!>    smalbe_solve). Off by default: measured in docs/RESULTS.md "Outer loop
-!>    (issue 14, item 1)".
+!>    smalbe_solve). Off by default here (smalbe_settings_t); `&solver` turns
+!>    it on behind a stall test (rho_stall), measured in docs/RESULTS.md
+!>    "Outer loop with the preconditioner".
 !>
 !> The test of step 4 compares the Lagrangians of consecutive pairs (x_k, mu_k)
 !> as PERMON's SMALXE does. Written with mu_{k+1} and mu_k instead,
