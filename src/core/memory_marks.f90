@@ -37,8 +37,10 @@ contains
       i = nmarks
     end if
     marks(i)%name = name
-    marks(i)%peak = proc_status_bytes('VmHWM')
+    ! VmRSS first: the peak read after it includes it (reading the file
+    ! allocates, so the other order could give a resident set above the peak)
     marks(i)%resident = proc_status_bytes('VmRSS')
+    marks(i)%peak = proc_status_bytes('VmHWM')
   end subroutine memory_mark
 
   !> Number of marks recorded.
