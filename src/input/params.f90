@@ -74,7 +74,7 @@ module params
     character(len=name_len) :: local_solver = 'block'    !< 'block' | 'subdomain'
     !> how F is applied: 'implicit' (K^+ solves) | 'explicit' (dense local
     !> operators, BLAS) | 'auto' (the cheaper one by the measured cost model)
-    character(len=name_len) :: f_action = 'implicit'
+    character(len=name_len) :: f_action = 'auto'
     character(len=name_len) :: f_storage = 'packed'      !< explicit F: 'packed' | 'symmetric' | 'general'
     !> 'auto' (coarse_ranks decides) | 'redundant' (= coarse_ranks 1) | 'distributed' (= all ranks)
     character(len=name_len) :: coarse_placement = 'auto'
