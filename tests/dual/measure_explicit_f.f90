@@ -5,8 +5,11 @@
 !> - ||F_exp x - F_imp x|| / ||F_imp x|| for keyed random x, for P x and for
 !>   the solution nu;
 !> - the symmetry defect |x^T F y - y^T F x| / (||x|| ||F y|| ...) of both;
-!> - the SMALBE run with each (outer, Hessian multiplications, measures);
-!>   mpirun -n 1 build-debug/tests/bin/measure_explicit_f [contrast [storage]]
+!> - the SMALBE run with each at `tol` (default 1e-10; outer, Hessian
+!>   multiplications, measures; a cap of 20000 Hessian multiplications, so
+!>   that a tol below the attainable floor shows where each stalls);
+!> - the equality measure at the solution and of a one-ulp perturbation;
+!>   mpirun -n 1 build-debug/tests/bin/measure_explicit_f [contrast [storage [tol]]]
 program measure_explicit_f
   use kinds, only: dp, ip
   use logger, only: logger_init
@@ -21,7 +24,7 @@ program measure_explicit_f
   integer :: ierr, rank
   type(params_t) :: p
   character(len=32) :: arg, storage
-  real(dp) :: contrast
+  real(dp) :: contrast, tol
 
   call MPI_Init(ierr)
   call MPI_Comm_rank(MPI_COMM_WORLD, rank, ierr)
@@ -33,6 +36,11 @@ program measure_explicit_f
   end if
   storage = 'packed'
   if (command_argument_count() >= 2) call get_command_argument(2, storage)
+  tol = 1.0e-10_dp
+  if (command_argument_count() >= 3) then
+    call get_command_argument(3, arg)
+    read (arg, *) tol
+  end if
   p = small_case('cube', [2_ip, 2_ip, 2_ip], [2_ip, 2_ip, 2_ip], 'box', 0.0_dp)
   p%boundary%top_displacement = [0.0_dp, 0.0_dp, -0.025_dp]
   if (contrast > 1) then
@@ -88,9 +96,47 @@ contains
     call report('nu (implicit solution)', nui, fi, fe)
     x = nue - nui
     if (rank == 0) write (*, '(a,es11.3)') '||nu_exp - nu_imp|| / ||nu_imp|| ', opi%norm(x)/opi%norm(nui)
+    call floor_of_eq_measure(opi, nui)
     call opi%free()
     call ope%free()
   end subroutine compare
+
+  !> The equality measure of dual_problem%eq_measure (max_s ||(G nu)_s||/E_s
+  !> over max_s max(||B_s^T lambda||, ||f_s||)/E_s) for nu itself and for a
+  !> perturbation of every entry of nu by one rounding, nu_i eps r_i with r_i
+  !> keyed random in [-1, 1]: no vector within one ulp of nu per entry has a
+  !> smaller measure in general, so the second is a floor of what SMALBE's
+  !> outer test can reach (eps = 2^-53). Also max |nu|, ||nu||.
+  subroutine floor_of_eq_measure(op, nu)
+    use feti_operators, only: local_field_t
+    use subdomain, only: subdomain_t
+    use mpi_f08, only: MPI_Allreduce, MPI_IN_PLACE, MPI_MAX, MPI_DOUBLE_PRECISION
+    type(feti_t), intent(inout), target :: op
+    real(dp), intent(in) :: nu(:)
+    type(local_field_t), allocatable :: btl(:)
+    type(subdomain_t), pointer :: subs(:)
+    real(dp), allocatable :: r(:), gx(:), gd(:), lambda(:)
+    real(dp) :: m(3)
+    integer(ip) :: ls
+    integer :: ierr2
+    allocate (r(size(nu)), gx(op%n_coarse()), gd(op%n_coarse()), btl(op%nlocal()))
+    call op%keyed_random(99, r)
+    r = nu*r*epsilon(1.0_dp)/2
+    call op%apply_g(nu, gx)
+    call op%apply_g(r, gd)
+    lambda = nu + op%lambda_tilde_vector()
+    call op%apply_bt(lambda, btl)
+    subs => op%subdomains()
+    m = 0
+    do ls = 1, op%nlocal()
+      m(1) = max(m(1), norm2(gx(6*ls - 5:6*ls))/subs(ls)%young)
+      m(2) = max(m(2), norm2(gd(6*ls - 5:6*ls))/subs(ls)%young)
+      m(3) = max(m(3), max(norm2(btl(ls)%v), norm2(subs(ls)%f))/subs(ls)%young)
+    end do
+    call MPI_Allreduce(MPI_IN_PLACE, m, 3, MPI_DOUBLE_PRECISION, MPI_MAX, MPI_COMM_WORLD, ierr2)
+    if (rank == 0) write (*, '(a,es11.3,a,es11.3,a,es11.3,a,es11.3)') 'equality measure at nu ', m(1)/m(3), &
+      ', of a one-ulp perturbation of nu ', m(2)/m(3), ';  max|nu| ', maxval(abs(nu)), ', ||nu|| ', op%norm(nu)
+  end subroutine floor_of_eq_measure
 
   subroutine report(label, x, fi, fe)
     character(len=*), intent(in) :: label
@@ -127,7 +173,7 @@ contains
     type(smalbe_settings_t) :: sp
     call hat%init(op, p%solver%rho_scale)
     sp = smalbe_settings(p%solver)
-    sp%tol = 1.0e-10_dp
+    sp%tol = tol
     sp%max_hessian = 20000
     sp%max_outer = 2000
     sp%monitor = .false.
