@@ -68,7 +68,7 @@ module params
     character(len=name_len) :: m_no_step = 'cut'
     real(dp) :: rho_growth = 1                !< adaptive rho: factor (1: rho constant)
     real(dp) :: rho_contraction = 0.5_dp      !< raise rho when ||C x|| shrinks by less than this per outer
-    integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| power method
+    integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
     character(len=name_len) :: local_solver = 'block'    !< 'block' | 'subdomain'
