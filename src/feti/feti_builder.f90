@@ -5,6 +5,7 @@
 !> (G G^T, projector) and 'dual setup' (d, e, lambda~, ||P F P||).
 submodule(feti_operators) feti_builder
   use timers, only: timer_start, timer_stop
+  use memory_marks, only: memory_mark
   use kinds, only: MPI_INT_I8, MPI_REAL_DP
   use decomposition, only: build_decomposition
   use subdomain, only: build_subdomain
@@ -37,32 +38,38 @@ contains
       call build_subdomain(this%dec, this%dec%local_subdomains(ls), this%subs(ls))
     end do
     call timer_stop('mesh')
+    call memory_mark('mesh')
 
     call timer_start('assembly')
     do ls = 1, this%n_local_subs
       call assemble_subdomain(p, this%dec, this%subs(ls))
     end do
     call timer_stop('assembly')
+    call memory_mark('assembly')
 
     mydofs = sum(this%subs(:)%ndof)
     call timer_start('factorization')
     call this%f%init(this%subs, p%solver%local_solver, p%solver%regularization, p%solver%local_ordering, &
                      int(mydofs, ip))
     call timer_stop('factorization')
+    call memory_mark('factorization')
 
     call timer_start('B and G')
     call this%b%init(p, this%dec, this%subs, comm)
     call MPI_Allreduce(mydofs, this%n_primal_dofs, 1, MPI_INT_I8, MPI_SUM, comm, ierr)
     allocate (this%xall(this%b%n_concat()))
     call timer_stop('B and G')
+    call memory_mark('B and G')
 
     call timer_start('explicit F')
     call choose_f_action(this, p)
     call timer_stop('explicit F')
+    call memory_mark('explicit F')
 
     call timer_start('coarse setup')
     call this%proj%init(this%dec, this%b, comm, p%solver)
     call timer_stop('coarse setup')
+    call memory_mark('coarse setup')
 
     call timer_start('dual setup')
     associate (n => this%b%n_own())
@@ -103,6 +110,7 @@ contains
     end associate
     call estimate_norm_pfp(this, p%solver%power_iterations)
     call timer_stop('dual setup')
+    call memory_mark('dual setup')
 
   contains
 
