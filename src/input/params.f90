@@ -76,13 +76,13 @@ module params
     integer(ip) :: rho_window = 10
     !> > 0: the first raise only on a stall (contraction worse than this over rho_window), later ones per iteration
     real(dp) :: rho_stall = 0.95_dp
-    integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| power method
+    integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
     character(len=name_len) :: local_solver = 'block'    !< 'block' | 'subdomain'
     !> how F is applied: 'implicit' (K^+ solves) | 'explicit' (dense local
     !> operators, BLAS) | 'auto' (the cheaper one by the measured cost model)
-    character(len=name_len) :: f_action = 'implicit'
+    character(len=name_len) :: f_action = 'auto'
     character(len=name_len) :: f_storage = 'packed'      !< explicit F: 'packed' | 'symmetric' | 'general'
     !> 'auto' (coarse_ranks decides) | 'redundant' (= coarse_ranks 1) | 'distributed' (= all ranks)
     character(len=name_len) :: coarse_placement = 'auto'
