@@ -1,8 +1,9 @@
 !> The FETI preconditioners of the dual operator F = B K^+ B^T (`&solver
 !> preconditioner`):
 !>
-!>     M^{-1} = sum_s B_D^s A_s B_D^s^T,   B_D^s = B^s / w_s,
+!>     M^{-1} = D (sum_s B_D^s A_s B_D^s^T) D,   B_D^s = B^s / w_s,
 !>
+!> (D: the contact-row scaling below)
 !> with w_s = E_s/young the weight of subdomain s that the rows of B use
 !> with `&solver scaling = 'young'` (1 with 'none'), so that
 !> B diag(1/w) B^T = I per node on the gluing and Dirichlet rows, and
@@ -25,9 +26,10 @@
 !> the effective number of copies of the node (n for n copies of equal
 !> weight, 1 for a row on one copy, about the number of stiff copies across
 !> a material jump). The contact row's diagonal of B_D A B_D^T is the
-!> weighted mean of its copies' stiffnesses, sum_c A_c,zz / S; n_r D^2 makes
-!> it their sum, the stiffness of the assembled node against a force on the
-!> node (docs/THEORY.md "Preconditioned MPRGP", measured in
+!> weighted mean of its copies' stiffnesses, sum_c A_c,zz / S; d_r^2 = n_r
+!> makes it (n_r/S) sum_c A_c,zz, for equal weights (S = n_r = n) their sum,
+!> the stiffness of the assembled node against a force on the node
+!> (docs/THEORY.md "Preconditioned MPRGP"; the exponent is measured,
 !> docs/RESULTS.md). D is positive, so M^{-1} stays symmetric positive
 !> semidefinite and positive definite on the range of P (docs/THEORY.md).
 !> Timer 'preconditioner'.
