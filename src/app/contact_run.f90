@@ -8,6 +8,7 @@ module contact_run
   use errors, only: exit_not_converged, exit_kkt_failed
   use logger, only: log_section, log_message
   use timers, only: timer_start, timer_stop, timers_reduce, timer_stat_t
+  use memory_marks, only: memory_mark
   use params, only: params_t
   use smalbe, only: smalbe_t
   use tfeti_dualization, only: tfeti_dualization_t, dual_solution_t, smalbe_settings
@@ -45,18 +46,22 @@ contains
     call timer_start('total')
     ! 1. set-up: mesh, assembly, K^+, B and G, coarse problem, d, e, lambda~, ||P F P||, the dual QP
     call dual%setup(p, comm)
+    call memory_mark('dual QP setup')
     ! 2. solve: SMALBE (outer) + MPRGP (inner) on the dual QP
     call log_section('SMALBE / MPRGP')
     call solver%init_with(smalbe_settings(p%solver), dual%hessian_norm())
     call dual%solve(solver, nu, seconds)
+    call memory_mark('solve')
     ! 3. post-solve: lambda, alpha_bar (Eq. 24/25 and/or 10), u, KKT residuals
     call dual%post_solve(nu, solver%muhat, sol)
+    call memory_mark('post-solve')
     ! 4. report: contact summary, fields, timings, report.json
     call timer_start('output')
     call summarize_contact(dual%operators(), sol%lambda, p%reconstruction%active_tol, contact)
     if (p%output%write_hdf5) call write_run_fields(dual%operators(), sol%u, contact, p%output%directory, &
                                                    p%output%run_name)
     call timer_stop('output')
+    call memory_mark('output')
     call timer_stop('total')
     write (line, '(a,es12.5,a,es12.5,a,i0,a,es12.5)') 'contact force ', contact%total_force, &
       ', max pressure ', contact%max_pressure, ', active nodes ', contact%active_nodes, &

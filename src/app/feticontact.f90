@@ -13,6 +13,7 @@ program feticontact
   use params, only: params_t, read_params, echo_params
   use contact_run, only: run_contact_case
   use blas_threads, only: blas_threads_setup, blas_log_line
+  use memory_marks, only: memory_mark
   use mpi_f08, only: MPI_Init, MPI_Finalize, MPI_COMM_WORLD, MPI_Comm_size
   implicit none
 
@@ -35,6 +36,7 @@ program feticontact
   call MPI_Comm_size(MPI_COMM_WORLD, nranks, ierr)
   ! before any BLAS work: one BLAS thread per rank unless the user says otherwise
   call blas_threads_setup(MPI_COMM_WORLD)
+  call memory_mark('MPI_Init')
 
   check_only = .false.
   status = 0

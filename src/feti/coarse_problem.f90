@@ -24,8 +24,8 @@
 !> one MUMPS factorization of the whole G G^T on its subcommunicator
 !> (distributed assembled input; on a group of one rank, centralized input on
 !> that rank). Each rank sends its COO entries to one member of every group
-!> (one MPI_Alltoallv). A solve gathers the group's blocks to the group's
-!> first rank (MPI_Gatherv), the first ranks of all groups exchange their
+!> (point to point: a rank talks to ngroups + P/c ranks, not to all). A
+!> solve gathers the group's blocks to the group's first rank (MPI_Gatherv), the first ranks of all groups exchange their
 !> parts (MPI_Allgatherv), MUMPS solves on the group, and the first rank
 !> scatters the solution inside the group (MPI_Scatterv). c = 1 is the old
 !> 'redundant' placement (every rank factorizes alone; a solve is one
@@ -39,7 +39,8 @@ module coarse_problem
   use mumps_wrapper, only: mumps_t
   use block_hash, only: block_hash_t
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gatherv, MPI_Scatterv, MPI_Wtime, &
-                     MPI_Allgatherv, MPI_Alltoall, MPI_Alltoallv, MPI_INTEGER, MPI_Comm_split, &
+                     MPI_Allgatherv, MPI_Isend, MPI_Irecv, MPI_Waitall, MPI_Request, MPI_STATUSES_IGNORE, &
+                     MPI_INTEGER, MPI_Comm_split, &
                      MPI_Comm_free, MPI_COMM_NULL, MPI_UNDEFINED, MPI_IN_PLACE, &
                      operator(/=)
   implicit none
@@ -223,33 +224,61 @@ contains
   contains
 
     !> Each rank's entries to one member of every group: in group g (ranks
-    !> first(g) .. first(g+1)-1) to first(g) + mod(rank, its size). A member
-    !> receives the entries of about c ranks' worth... of P / size ranks.
+    !> first(g) .. first(g+1)-1, size s_g) to first(g) + mod(rank, s_g). A
+    !> member m of group g receives from the ranks r with mod(r, s_g) = m
+    !> (about P / s_g ranks), in ascending rank order. Point to
+    !> point with these ranks only (no collective over all ranks: a rank
+    !> talks to ngroups + P / c peers, not to all P).
     subroutine send_to_groups(irn, jcn, a)
       integer(ip), allocatable, intent(inout) :: irn(:), jcn(:)
       real(dp), allocatable, intent(inout) :: a(:)
-      integer, allocatable :: scounts(:), sdispls(:), rcounts(:), rdispls(:), first(:)
+      integer, allocatable :: first(:), sources(:), rcounts(:), rdispls(:), dests(:)
+      type(MPI_Request), allocatable :: req(:)
       integer(ip), allocatable :: new_i(:), new_j(:)
       real(dp), allocatable :: new_a(:)
-      integer :: nranks, g, r, dest
+      integer :: nranks, g, k, nsrc, mine, member, gsize, nreq
       call MPI_Comm_size(comm, nranks, ierr)
-      allocate (scounts(nranks), sdispls(nranks), rcounts(nranks), rdispls(nranks))
       call group_starts(nranks, this%ngroups, first)
-      scounts = 0
-      sdispls = 0                      ! every destination reads the same entries
+      allocate (dests(this%ngroups))
       do g = 0, this%ngroups - 1
-        dest = first(g) + mod(rank, first(g + 1) - first(g))
-        scounts(dest + 1) = size(a)
+        dests(g + 1) = first(g) + mod(rank, first(g + 1) - first(g))
       end do
-      call MPI_Alltoall(scounts, 1, MPI_INTEGER, rcounts, 1, MPI_INTEGER, comm, ierr)
+      member = rank - first(this%group)
+      gsize = first(this%group + 1) - first(this%group)
+      sources = [(k, k = member, nranks - 1, gsize)]
+      nsrc = size(sources)
+      ! 1. the counts
+      mine = size(a)
+      allocate (rcounts(nsrc), rdispls(nsrc), req(nsrc + this%ngroups))
+      do k = 1, nsrc
+        call MPI_Irecv(rcounts(k), 1, MPI_INTEGER, sources(k), 1, comm, req(k), ierr)
+      end do
+      do g = 1, this%ngroups
+        call MPI_Isend(mine, 1, MPI_INTEGER, dests(g), 1, comm, req(nsrc + g), ierr)
+      end do
+      call MPI_Waitall(nsrc + this%ngroups, req, MPI_STATUSES_IGNORE, ierr)
       rdispls(1) = 0
-      do r = 2, nranks
-        rdispls(r) = rdispls(r - 1) + rcounts(r - 1)
+      do k = 2, nsrc
+        rdispls(k) = rdispls(k - 1) + rcounts(k - 1)
       end do
+      ! 2. the entries, in ascending source rank order
       allocate (new_i(sum(rcounts)), new_j(sum(rcounts)), new_a(sum(rcounts)))
-      call MPI_Alltoallv(irn, scounts, sdispls, MPI_INT_IP, new_i, rcounts, rdispls, MPI_INT_IP, comm, ierr)
-      call MPI_Alltoallv(jcn, scounts, sdispls, MPI_INT_IP, new_j, rcounts, rdispls, MPI_INT_IP, comm, ierr)
-      call MPI_Alltoallv(a, scounts, sdispls, MPI_REAL_DP, new_a, rcounts, rdispls, MPI_REAL_DP, comm, ierr)
+      deallocate (req)
+      allocate (req(3*(nsrc + this%ngroups)))
+      nreq = 0
+      do k = 1, nsrc
+        call MPI_Irecv(new_i(rdispls(k) + 1:), rcounts(k), MPI_INT_IP, sources(k), 2, comm, req(nreq + 1), ierr)
+        call MPI_Irecv(new_j(rdispls(k) + 1:), rcounts(k), MPI_INT_IP, sources(k), 3, comm, req(nreq + 2), ierr)
+        call MPI_Irecv(new_a(rdispls(k) + 1:), rcounts(k), MPI_REAL_DP, sources(k), 4, comm, req(nreq + 3), ierr)
+        nreq = nreq + 3
+      end do
+      do g = 1, this%ngroups
+        call MPI_Isend(irn, mine, MPI_INT_IP, dests(g), 2, comm, req(nreq + 1), ierr)
+        call MPI_Isend(jcn, mine, MPI_INT_IP, dests(g), 3, comm, req(nreq + 2), ierr)
+        call MPI_Isend(a, mine, MPI_REAL_DP, dests(g), 4, comm, req(nreq + 3), ierr)
+        nreq = nreq + 3
+      end do
+      call MPI_Waitall(nreq, req, MPI_STATUSES_IGNORE, ierr)
       call move_alloc(new_i, irn)
       call move_alloc(new_j, jcn)
       call move_alloc(new_a, a)

@@ -68,13 +68,13 @@ module params
     character(len=name_len) :: m_no_step = 'cut'
     real(dp) :: rho_growth = 1                !< adaptive rho: factor (1: rho constant)
     real(dp) :: rho_contraction = 0.5_dp      !< raise rho when ||C x|| shrinks by less than this per outer
-    integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| power method
+    integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
     character(len=name_len) :: local_solver = 'block'    !< 'block' | 'subdomain'
     !> how F is applied: 'implicit' (K^+ solves) | 'explicit' (dense local
     !> operators, BLAS) | 'auto' (the cheaper one by the measured cost model)
-    character(len=name_len) :: f_action = 'implicit'
+    character(len=name_len) :: f_action = 'auto'
     character(len=name_len) :: f_storage = 'packed'      !< explicit F: 'packed' | 'symmetric' | 'general'
     !> 'auto' (coarse_ranks decides) | 'redundant' (= coarse_ranks 1) | 'distributed' (= all ranks)
     character(len=name_len) :: coarse_placement = 'auto'

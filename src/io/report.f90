@@ -1,13 +1,14 @@
 !> Pieces of the run report: the timing table (printed and as JSON) and the
 !> peak memory of the ranks.
 module report
-  use kinds, only: dp, i8, MPI_INT_I8
+  use kinds, only: dp, i8, name_len, MPI_INT_I8
+  use memory_marks, only: memory_mark_count, memory_mark_get
   use proc_status, only: proc_status_bytes
   use timers, only: timer_stat_t
   use logger, only: log_is_root, log_unit
   use json_writer, only: json_writer_t
   use params, only: params_t, param_item_t, param_items, group_names
-  use mpi_f08, only: MPI_Comm, MPI_Allreduce, MPI_MAX, MPI_MIN, MPI_SUM
+  use mpi_f08, only: MPI_Comm, MPI_Comm_size, MPI_Allreduce, MPI_MAX, MPI_MIN, MPI_SUM
   implicit none
   private
 
@@ -76,20 +77,34 @@ contains
     json = w%text()
   end function timings_json
 
-  !> {"peak_rss_bytes": {"max": .., "sum": ..}}: the largest peak of one rank
-  !> and the sum over the ranks of `comm` (null if some rank cannot tell).
-  !> Collective.
+  !> {"peak_rss_bytes": {"max": .., "sum": ..}, "phases": [..]}: the largest
+  !> peak of one rank and the sum over the ranks of `comm` (null if some rank
+  !> cannot tell); "phases": one object per memory_mark, in the order they
+  !> were recorded, {"name", "peak_max", "peak_mean", "rss_max", "rss_mean"}
+  !> (VmHWM and VmRSS at that mark, bytes, over the ranks). Collective; every
+  !> rank must have recorded the same marks.
   function memory_json(comm) result(json)
     type(MPI_Comm), intent(in) :: comm
     character(len=:), allocatable :: json
     type(json_writer_t) :: w
     integer(i8) :: mine, most, least, total
-    integer :: ierr
+    integer(i8), allocatable :: local(:, :), hi(:, :), sums(:, :)
+    character(len=name_len) :: name
+    integer :: ierr, nranks, n, i
 
     mine = proc_status_bytes('VmHWM')     ! peak resident set size
     call MPI_Allreduce(mine, most, 1, MPI_INT_I8, MPI_MAX, comm, ierr)
     call MPI_Allreduce(mine, least, 1, MPI_INT_I8, MPI_MIN, comm, ierr)
     call MPI_Allreduce(max(mine, 0_i8), total, 1, MPI_INT_I8, MPI_SUM, comm, ierr)
+    call MPI_Comm_size(comm, nranks, ierr)
+    n = memory_mark_count()
+    allocate (local(2, max(n, 1)), hi(2, max(n, 1)), sums(2, max(n, 1)))
+    local = 0
+    do i = 1, n
+      call memory_mark_get(i, name, local(1, i), local(2, i))
+    end do
+    call MPI_Allreduce(local, hi, 2*max(n, 1), MPI_INT_I8, MPI_MAX, comm, ierr)
+    call MPI_Allreduce(local, sums, 2*max(n, 1), MPI_INT_I8, MPI_SUM, comm, ierr)
     call w%begin_object()
     call w%begin_object('peak_rss_bytes')
     if (least < 0) then
@@ -100,6 +115,18 @@ contains
       call w%add('sum', total)
     end if
     call w%end_object()
+    call w%begin_array('phases')
+    do i = 1, n
+      call memory_mark_get(i, name, local(1, i), local(2, i))
+      call w%begin_object()
+      call w%add('name', trim(name))
+      call w%add('peak_max', hi(1, i))
+      call w%add('peak_mean', sums(1, i)/nranks)
+      call w%add('rss_max', hi(2, i))
+      call w%add('rss_mean', sums(2, i)/nranks)
+      call w%end_object()
+    end do
+    call w%end_array()
     call w%end_object()
     json = w%text()
   end function memory_json

@@ -135,6 +135,15 @@ def check_report(outdir, ranks):
           "timings: min <= mean <= max")
     check(t["solve"]["max"] <= t["total"]["max"], "solve time <= total time")
     check(r["memory"]["peak_rss_bytes"]["max"] > 0, "peak RSS reported")
+    phases = r["memory"].get("phases", [])
+    names = [ph["name"] for ph in phases]
+    check(names[:2] == ["MPI_Init", "mesh"] and "coarse setup" in names and names[-1] == "output",
+          "memory.phases from MPI_Init to output: %s" % names)
+    check(all(0 < ph["rss_mean"] <= ph["peak_mean"] <= ph["peak_max"] and ph["rss_mean"] <= ph["rss_max"]
+              for ph in phases), "memory.phases: 0 < rss_mean <= peak_mean <= peak_max")
+    # VmHWM never decreases: the marks in order, and the final peak is the largest
+    check(all(a["peak_max"] <= b["peak_max"] for a, b in zip(phases, phases[1:])), "memory.phases: peaks grow")
+    check(phases[-1]["peak_max"] <= r["memory"]["peak_rss_bytes"]["max"], "last mark <= peak RSS")
     force = r["contact"]["total_force"]
     check(force >= 0, "total contact force >= 0")
 
