@@ -73,8 +73,13 @@
 !> proportionality (phi, beta, phit), the expansion step (along phi, length
 !> alpha_bar) and the proportioning step (along beta), and the stopping test
 !> keep their unpreconditioned forms, so the bounds stay simple. z is
-!> computed only when a CG step follows (lazily after an expansion or
-!> proportioning step): one preconditioner application per CG step.
+!> computed only when the iterate is proportional and not converged, i.e.
+!> when its direction is used: after a CG step the conjugation
+!> (z, beta_cg = z^T A p / p^T A p with the A p and p^T A p of that step, one
+!> more reduction) waits for the next iteration's stopping and
+!> proportionality tests, so no application (two projections, two coarse
+!> solves, and M^{-1}) is spent on the iterate where an inner solve stops or
+!> a proportioning step follows. The iterates are those of the eager form.
 !>
 !> Face condition estimate: the step lengths and conjugation coefficients
 !> of every run of consecutive CG steps (between two restarts of p) are a
@@ -291,7 +296,7 @@ contains
     integer(ip), intent(in) :: max_hessian
     logical, intent(in) :: gradient_given
     real(dp) :: stats(4), gp, alpha_f, alpha_cg, beta_cg, pap
-    logical :: stop, restart
+    logical :: stop, restart, conjugate_pending
     integer(ip) :: n
 
     n = problem%n
@@ -328,6 +333,7 @@ contains
     call gradient_part(problem, x, g, .false., self%p)
     call split_stats(self, problem, x, g, stats)
     restart = .true.
+    conjugate_pending = .false.
 
     do
       gp = sqrt(stats(1) + stats(2))
@@ -356,7 +362,20 @@ contains
           if (self%preconditioned) call free_direction(self, problem, x, g, self%p)
           call self%ritz%begin_run()
           restart = .false.
+        else if (conjugate_pending) then
+          ! after a CG step (preconditioned): z, beta_cg = z^T A p / p^T A p with
+          ! A p and p^T A p of that step, p <- z - beta_cg p
+          call free_direction(self, problem, x, g, self%w_phi)
+          beta_cg = free_dot(problem, x, self%w_phi, self%ap)/pap
+          if (.not. ieee_is_finite(beta_cg)) then
+            call set_status(self, qp_status_not_finite, 'non-finite CG orthogonalization coefficient', &
+                            self%n_iterations)
+            exit
+          end if
+          call self%ritz%add_beta(-beta_cg)
+          call conjugate(problem, x, self%w_phi, beta_cg, self%p)
         end if
+        conjugate_pending = .false.
         alpha_f = feasible_step(problem, x, self%p)
         if (.not. step_along_p(self, problem, g, .not. ieee_is_nan(alpha_f), 'p', &
                                'p^T A p, g^T p or the feasible step', 'CG', pap, alpha_cg)) exit
@@ -367,25 +386,22 @@ contains
           ! (preconditioned: p <- z - beta_cg p, beta_cg = z^T A p / p^T A p)
           call take_step(problem, x, g, alpha_cg, self%p, self%ap)
           call problem%track_step(alpha_cg)
+          self%n_cg = self%n_cg + 1
           if (self%preconditioned) then
-            call free_direction(self, problem, x, g, self%w_phi)
-            call split_stats(self, problem, x, g, stats, self%ap, self%w_phi)
+            ! z and the conjugation wait until a CG step follows (see the module)
+            call split_stats(self, problem, x, g, stats)
+            conjugate_pending = .true.
           else
             call split_stats(self, problem, x, g, stats, self%ap)
-          end if
-          beta_cg = stats(4)/pap
-          if (.not. ieee_is_finite(beta_cg)) then
-            call set_status(self, qp_status_not_finite, 'non-finite CG orthogonalization coefficient', &
-                            self%n_iterations)
-            exit
-          end if
-          call self%ritz%add_beta(-beta_cg)
-          if (self%preconditioned) then
-            call conjugate(problem, x, self%w_phi, beta_cg, self%p)
-          else
+            beta_cg = stats(4)/pap
+            if (.not. ieee_is_finite(beta_cg)) then
+              call set_status(self, qp_status_not_finite, 'non-finite CG orthogonalization coefficient', &
+                              self%n_iterations)
+              exit
+            end if
+            call self%ritz%add_beta(-beta_cg)
             call conjugate(problem, x, g, beta_cg, self%p)
           end if
-          self%n_cg = self%n_cg + 1
         else
           restart = .true.
           call self%ritz%end_run()
@@ -401,6 +417,7 @@ contains
       else
         ! proportioning step along beta
         restart = .true.
+        conjugate_pending = .false.
         call self%ritz%end_run()
         call gradient_part(problem, x, g, .true., self%p)
         if (.not. step_along_p(self, problem, g, .true., 'beta', 'beta^T A beta or g^T beta', 'proportioning', &
@@ -641,15 +658,15 @@ contains
   end subroutine conjugate
 
   !> Global [phi^T phi, beta^T beta, phit^T phi, phi^T v] in one reduction
-  !> (the last entry 0 without v; with z, z^T v over the free set instead).
+  !> (the last entry 0 without v).
   !> phit uses alpha_bar; it is formed without dividing by alpha_bar unless
   !> the result is below phi_i (no overflow).
-  subroutine split_stats(self, problem, x, g, stats, v, z)
+  subroutine split_stats(self, problem, x, g, stats, v)
     class(mprgp_t), intent(in) :: self
     class(qp_problem_t), intent(in) :: problem
     real(dp), intent(in) :: x(:), g(:)
     real(dp), intent(out) :: stats(4)
-    real(dp), intent(in), optional :: v(:), z(:)
+    real(dp), intent(in), optional :: v(:)
     real(dp) :: gi, d, abar, hi(4), lo(4)
     integer(ip) :: i
 
@@ -674,17 +691,28 @@ contains
         call compensated_add(hi(2), lo(2), gi*gi)
       end if
     end do
-    if (present(v) .and. present(z)) then
-      do i = 1, problem%n
-        if (x(i) > problem%lower(i)) call compensated_add(hi(4), lo(4), z(i)*v(i))
-      end do
-    else if (present(v)) then
+    if (present(v)) then
       do i = 1, problem%n
         if (x(i) > problem%lower(i)) call compensated_add(hi(4), lo(4), g(i)*v(i))
       end do
     end if
     call problem%reduce_sums(hi, lo, stats)
   end subroutine split_stats
+
+  !> Global z^T v over the free set (x_i > l_i), one reduction (compensated).
+  real(dp) function free_dot(problem, x, z, v)
+    class(qp_problem_t), intent(in) :: problem
+    real(dp), intent(in) :: x(:), z(:), v(:)
+    real(dp) :: hi(1), lo(1), res(1)
+    integer(ip) :: i
+    hi = 0
+    lo = 0
+    do i = 1, problem%n
+      if (x(i) > problem%lower(i)) call compensated_add(hi(1), lo(1), z(i)*v(i))
+    end do
+    call problem%reduce_sums(hi, lo, res)
+    free_dot = res(1)
+  end function free_dot
 
   !> The largest alpha with x - alpha p >= l (global); huge(1.0_dp) when no
   !> bound limits the step.
