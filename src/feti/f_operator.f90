@@ -20,6 +20,7 @@
 !>   subdomain up to 7 times), so S^_s is smaller than F^s itself.
 module f_operator
   use kinds, only: dp, ip, i8
+  use lapack_interfaces, only: dpotrf, dpotri, dsymv, dspmv, dgemv
   use errors, only: fatal_error
   use timers, only: timer_start, timer_stop
   use subdomain, only: subdomain_t
@@ -70,43 +71,6 @@ module f_operator
     procedure :: free
   end type f_operator_t
 
-  interface
-    subroutine dpotrf(uplo, n, a, lda, info)
-      import :: dp
-      character(len=1), intent(in) :: uplo
-      integer, intent(in) :: n, lda
-      real(dp), intent(inout) :: a(lda, *)
-      integer, intent(out) :: info
-    end subroutine dpotrf
-    subroutine dpotri(uplo, n, a, lda, info)
-      import :: dp
-      character(len=1), intent(in) :: uplo
-      integer, intent(in) :: n, lda
-      real(dp), intent(inout) :: a(lda, *)
-      integer, intent(out) :: info
-    end subroutine dpotri
-    subroutine dsymv(uplo, n, alpha, a, lda, x, incx, beta, y, incy)
-      import :: dp
-      character(len=1), intent(in) :: uplo
-      integer, intent(in) :: n, lda, incx, incy
-      real(dp), intent(in) :: alpha, beta, a(lda, *), x(*)
-      real(dp), intent(inout) :: y(*)
-    end subroutine dsymv
-    subroutine dspmv(uplo, n, alpha, ap, x, incx, beta, y, incy)
-      import :: dp
-      character(len=1), intent(in) :: uplo
-      integer, intent(in) :: n, incx, incy
-      real(dp), intent(in) :: alpha, beta, ap(*), x(*)
-      real(dp), intent(inout) :: y(*)
-    end subroutine dspmv
-    subroutine dgemv(trans, m, n, alpha, a, lda, x, incx, beta, y, incy)
-      import :: dp
-      character(len=1), intent(in) :: trans
-      integer, intent(in) :: m, n, lda, incx, incy
-      real(dp), intent(in) :: alpha, beta, a(lda, *), x(*)
-      real(dp), intent(inout) :: y(*)
-    end subroutine dgemv
-  end interface
 
 contains
 

@@ -33,6 +33,7 @@
 !> `orthonormal_max_subdomains` subdomains (coarse dimension 6144).
 module orthonormal_coarse
   use kinds, only: dp, ip, i8, MPI_REAL_DP
+  use lapack_interfaces, only: dpotrf, dtrsm, dtrsv, dgemv
   use errors, only: collective_error, exit_input_error, exit_internal
   use decomposition, only: decomposition_t
   use constraints, only: constraints_t
@@ -47,38 +48,6 @@ module orthonormal_coarse
   !> the Allreduce of G G^T are 302 MB per rank).
   integer(ip), parameter, public :: orthonormal_max_subdomains = 1024
 
-  interface
-    subroutine dpotrf(uplo, n, a, lda, info)
-      import :: dp
-      character(len=1), intent(in) :: uplo
-      integer, intent(in) :: n, lda
-      real(dp), intent(inout) :: a(lda, *)
-      integer, intent(out) :: info
-    end subroutine dpotrf
-    subroutine dtrsm(side, uplo, transa, diag, m, n, alpha, a, lda, b, ldb)
-      import :: dp
-      character(len=1), intent(in) :: side, uplo, transa, diag
-      integer, intent(in) :: m, n, lda, ldb
-      real(dp), intent(in) :: alpha
-      real(dp), intent(in) :: a(lda, *)
-      real(dp), intent(inout) :: b(ldb, *)
-    end subroutine dtrsm
-    subroutine dtrsv(uplo, trans, diag, n, a, lda, x, incx)
-      import :: dp
-      character(len=1), intent(in) :: uplo, trans, diag
-      integer, intent(in) :: n, lda, incx
-      real(dp), intent(in) :: a(lda, *)
-      real(dp), intent(inout) :: x(*)
-    end subroutine dtrsv
-    subroutine dgemv(trans, m, n, alpha, a, lda, x, incx, beta, y, incy)
-      import :: dp
-      character(len=1), intent(in) :: trans
-      integer, intent(in) :: m, n, lda, incx, incy
-      real(dp), intent(in) :: alpha, beta
-      real(dp), intent(in) :: a(lda, *), x(*)
-      real(dp), intent(inout) :: y(*)
-    end subroutine dgemv
-  end interface
 
   !> G G^T = L L^T (replicated) and this rank's columns of G~ = L^{-1} G.
   !> Work arrays are allocated in `init`; the operators allocate nothing.

@@ -28,6 +28,7 @@
 !> node, given to MUMPS as its pivot order; 'amd' = MUMPS's AMD.
 module kplus
   use kinds, only: dp, ip, i8
+  use lapack_interfaces, only: dsyev
   use errors, only: fatal_error
   use subdomain, only: subdomain_t, node_dofs
   use sorting, only: sort_ints, append_int
@@ -44,16 +45,6 @@ module kplus
   integer(ip), parameter :: max_fixing_nodes = 12
   real(dp), parameter :: gram_ratio_min = 1.0e-12_dp
 
-  interface
-    subroutine dsyev(jobz, uplo, n, a, lda, w, work, lwork, info)
-      import :: dp
-      character(len=1), intent(in) :: jobz, uplo
-      integer, intent(in) :: n, lda, lwork
-      real(dp), intent(inout) :: a(lda, *)
-      real(dp), intent(out) :: w(*), work(*)
-      integer, intent(out) :: info
-    end subroutine dsyev
-  end interface
 
   !> K^+ of one subdomain. Components are for reading (diagnostics, tests).
   !> Do not copy a kplus_t by assignment (it holds a MUMPS instance).

@@ -23,7 +23,7 @@
 !>
 !> Expansion step length alpha_e:
 !> - 'fixed': alpha_e = alpha_bar = alpha_scale / ||A|| (||A|| from the
-!>   caller, e.g. a power method); alpha_scale in (0, 2] keeps the cost
+!>   caller, e.g. Lanczos or a power method); alpha_scale in (0, 2] keeps the cost
 !>   decreasing when ||A|| is not underestimated;
 !> - 'optimal': alpha_e = phi^T g / phi^T A phi, the minimizer of the cost
 !>   along -phi without bounds, then projected. The cost f = 1/2 x^T (g - c)
@@ -33,15 +33,15 @@
 !>   'fixed' (two more on a fallback).
 !>
 !> The norm estimate ||A|| (a_norm) only has to bound the spectrum from above
-!> for 'fixed' to be safe, yet callers estimate it by a power method, which
-!> approaches ||A|| from below. Every CG, proportioning and optimal expansion
+!> for 'fixed' to be safe, yet callers estimate it by Lanczos (FETI) or a power
+!> method, which approach ||A|| from below. Every CG, proportioning and optimal expansion
 !> direction d gives a Rayleigh quotient d^T A d / d^T d <= ||A|| for one more
 !> local dot product in a reduction that is made anyway; when it exceeds
 !> a_norm, a_norm is raised to it and alpha_bar = alpha_scale/a_norm follows
 !> (counted in n_norm_updates, kept across calls). It restores
-!> alpha_bar <= 2/||A|| when the caller's estimate is low; with the default
-!> power method (within 0.4% of ||A||) it never triggered in the hard cases
-!> (docs/RESULTS.md, "Hessian norm estimate").
+!> alpha_bar <= 2/||A|| when the caller's estimate is low; with the power
+!> method that FETI used before Lanczos (within 0.4% of ||A||) it never
+!> triggered in the hard cases (docs/RESULTS.md, "Hessian norm estimate").
 !>
 !> The stopping rule is an object (`mprgp_stop_t`) asked every iteration with
 !> the current x and ||g^P||, so that SMALBE can stop the inner loop on
@@ -295,7 +295,7 @@ contains
     class(mprgp_stop_t), intent(inout) :: stop_rule
     integer(ip), intent(in) :: max_hessian
     logical, intent(in) :: gradient_given
-    real(dp) :: stats(4), gp, alpha_f, alpha_cg, beta_cg, pap
+    real(dp) :: stats(4), gp, alpha_f, alpha_cg, pap
     logical :: stop, restart, conjugate_pending
     integer(ip) :: n
 
@@ -366,14 +366,7 @@ contains
           ! after a CG step (preconditioned): z, beta_cg = z^T A p / p^T A p with
           ! A p and p^T A p of that step, p <- z - beta_cg p
           call free_direction(self, problem, x, g, self%w_phi)
-          beta_cg = free_dot(problem, x, self%w_phi, self%ap)/pap
-          if (.not. ieee_is_finite(beta_cg)) then
-            call set_status(self, qp_status_not_finite, 'non-finite CG orthogonalization coefficient', &
-                            self%n_iterations)
-            exit
-          end if
-          call self%ritz%add_beta(-beta_cg)
-          call conjugate(problem, x, self%w_phi, beta_cg, self%p)
+          if (.not. conjugated(self, problem, x, self%w_phi, free_dot(problem, x, self%w_phi, self%ap)/pap)) exit
         end if
         conjugate_pending = .false.
         alpha_f = feasible_step(problem, x, self%p)
@@ -393,14 +386,7 @@ contains
             conjugate_pending = .true.
           else
             call split_stats(self, problem, x, g, stats, self%ap)
-            beta_cg = stats(4)/pap
-            if (.not. ieee_is_finite(beta_cg)) then
-              call set_status(self, qp_status_not_finite, 'non-finite CG orthogonalization coefficient', &
-                              self%n_iterations)
-              exit
-            end if
-            call self%ritz%add_beta(-beta_cg)
-            call conjugate(problem, x, g, beta_cg, self%p)
+            if (.not. conjugated(self, problem, x, g, stats(4)/pap)) exit
           end if
         else
           restart = .true.
@@ -432,6 +418,22 @@ contains
     end do
     call self%ritz%end_run()
   end subroutine minimize
+
+  !> After a CG step: p <- d - beta_cg p on the free set (d = phi, or z when
+  !> preconditioned), beta_cg recorded for the Ritz values. .false. (status
+  !> set) when beta_cg is not finite.
+  logical function conjugated(self, problem, x, d, beta_cg)
+    class(mprgp_t), intent(inout) :: self
+    class(qp_problem_t), intent(in) :: problem
+    real(dp), intent(in) :: x(:), d(:), beta_cg
+    conjugated = ieee_is_finite(beta_cg)
+    if (.not. conjugated) then
+      call set_status(self, qp_status_not_finite, 'non-finite CG orthogonalization coefficient', self%n_iterations)
+      return
+    end if
+    call self%ritz%add_beta(-beta_cg)
+    call conjugate(problem, x, d, beta_cg, self%p)
+  end function conjugated
 
   !> v = R_F M_A^{-1} R_F g: the problem's preconditioner applied to the free
   !> gradient phi, restricted to the free set (0 where x_i is at its bound).
@@ -571,8 +573,8 @@ contains
   end subroutine direction_dots
 
   !> Every search direction d gives a Rayleigh quotient d^T A d / d^T d <= ||A||
-  !> for free. When one exceeds a_norm, the estimate from the caller (a power
-  !> method, which approaches ||A|| from below) was too small and the fixed
+  !> for free. When one exceeds a_norm, the estimate from the caller (Lanczos
+  !> or a power method, which approach ||A|| from below) was too small and the fixed
   !> expansion step alpha_bar = alpha_scale/a_norm could exceed 2/||A||, where
   !> the expansion no longer decreases the cost: raise a_norm to it. The
   !> estimate only grows, and never beyond ||A||.
