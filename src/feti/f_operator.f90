@@ -20,7 +20,7 @@
 !>   subdomain up to 7 times), so S^_s is smaller than F^s itself.
 module f_operator
   use kinds, only: dp, ip, i8
-  use lapack_interfaces, only: dpotrf, dpotri, dsymv, dspmv, dgemv, dgemm
+  use lapack_interfaces, only: dpotrf, dpotri, dsymv, dspmv, dgemv
   use errors, only: fatal_error
   use timers, only: timer_start, timer_stop
   use subdomain, only: subdomain_t
@@ -29,6 +29,7 @@ module f_operator
   use kplus_set, only: kplus_set_t
   use kplus_shared, only: kplus_shared_t
   use subdomain_classes, only: subdomain_classes_t, find_classes
+  use class_operator, only: class_operator_t
   use b_operator, only: b_operator_t
   use sorting, only: sort_unique
   use kplus, only: regularized_system
@@ -59,9 +60,7 @@ module f_operator
     ! ---- shared local operators (`share_subdomains = 'auto'` and classes found)
     type(subdomain_classes_t) :: classes          !< one class per subdomain without sharing
     logical :: sharing = .false.                  !< K^+ served per class (kplus_shared_t)
-    integer(ip), allocatable :: cn(:)             !< (nclass) n_c: dofs touched by B in class c (union)
-    integer(i8), allocatable :: coff(:)           !< (nclass+1) offsets of S^_c (n_c x n_c, full) in smat
-    real(dp), allocatable :: xw(:), yw(:)         !< work: the class's columns X and Y = S^_c X
+    type(class_operator_t) :: shared_op           !< S^_c per class, a_s = 1/c_s (explicit and shared)
   contains
     procedure :: init
     procedure :: build_explicit
@@ -79,6 +78,7 @@ module f_operator
     procedure :: is_shared
     procedure :: n_classes
     procedure :: shared_explicit_flops
+    procedure :: classes_found
     procedure :: free
   end type f_operator_t
 
@@ -273,7 +273,7 @@ contains
     real(dp), intent(inout) :: y(:)
     call timer_start('F action')
     if (this%explicit .and. this%sharing) then
-      call apply_explicit_shared(this, b, x, y)
+      call this%shared_op%apply(b, x, y)
     else if (this%explicit) then
       call apply_explicit(this, b, x, y)
     else
@@ -368,7 +368,7 @@ contains
     class(f_operator_t), intent(in) :: this
     type(b_operator_t), intent(in) :: b
     if (this%explicit .and. this%sharing) then
-      bytes_per_action = shared_explicit_bytes(this, b)
+      bytes_per_action = this%shared_op%bytes_per_action()
     else if (this%explicit) then
       bytes_per_action = this%explicit_bytes(b, this%storage, this%nd)
     else
@@ -393,18 +393,15 @@ contains
     integer(i8) :: o
     if (.not. this%explicit) call fatal_error('f_operator%local_operator: the explicit operators are not built')
     if (this%sharing) then
-      n = this%cn(this%classes%class_of(s))
-      o = this%coff(this%classes%class_of(s))
-    else
-      n = this%nd(s)
-      o = this%soff(s)
+      call this%shared_op%local_matrix(s, rows, fs)
+      return
     end if
+    n = this%nd(s)
+    o = this%soff(s)
     allocate (sf(n, n))
     do j = 1, n
       do i = 1, n
-        if (this%sharing) then
-          sf(i, j) = this%smat(o + int(j - 1, i8)*n + i)/this%classes%scale(s)
-        else if (this%storage == 'packed') then
+        if (this%storage == 'packed') then
           sf(i, j) = this%smat(o + int(max(i, j), i8)*(max(i, j) - 1)/2 + min(i, j))
         else if (this%storage == 'symmetric') then
           sf(i, j) = this%smat(o + int(max(i, j) - 1, i8)*n + min(i, j))
@@ -450,8 +447,7 @@ contains
     if (allocated(this%soff)) deallocate (this%soff)
     if (allocated(this%smat)) deallocate (this%smat)
     if (allocated(this%wloc)) deallocate (this%wloc, this%wloc2, this%t, this%u)
-    if (allocated(this%cn)) deallocate (this%cn, this%coff)
-    if (allocated(this%xw)) deallocate (this%xw, this%yw)
+    call this%shared_op%free()
     if (allocated(this%eoff)) deallocate (this%eoff)
     if (allocated(this%erow)) deallocate (this%erow, this%edof, this%eval)
     this%classes = subdomain_classes_t()
@@ -475,26 +471,13 @@ contains
     n_classes = this%classes%nclass
   end function n_classes
 
-  !> The union over the members of class `c` of the dofs B^s touches
-  !> (ascending, local numbering of the class), and its size n.
-  subroutine class_dofs(this, b, c, dofs, n)
+  !> The classes of congruent subdomains found by init (for the
+  !> preconditioner's shared matrices).
+  function classes_found(this) result(cl)
     class(f_operator_t), intent(in) :: this
-    type(b_operator_t), intent(in) :: b
-    integer(ip), intent(in) :: c
-    integer(ip), allocatable, intent(out) :: dofs(:)
-    integer(ip), intent(out) :: n
-    integer(ip), allocatable :: row(:), dof(:)
-    real(dp), allocatable :: val(:)
-    integer(ip) :: k
-    allocate (dofs(0))
-    do k = this%classes%moff(c) + 1, this%classes%moff(c + 1)
-      call b%subdomain_entries(this%classes%member(k), row, dof, val)
-      dofs = [dofs, dof]
-      call sort_unique(dofs, n)
-      dofs = dofs(1:n)
-    end do
-    n = size(dofs, kind=ip)
-  end subroutine class_dofs
+    type(subdomain_classes_t) :: cl
+    cl = this%classes
+  end function classes_found
 
   !> Flops of one shared explicit F action on this rank (2 n_c^2 m_c per
   !> class: the product S^_c X with m_c columns) and of its build (n_c^3 per
@@ -503,171 +486,79 @@ contains
     class(f_operator_t), intent(in) :: this
     type(b_operator_t), intent(in) :: b
     real(dp) :: fl(2)
-    integer(ip), allocatable :: dofs(:)
-    integer(ip) :: c, n, m
+    type(class_operator_t) :: tmp
     fl = 0
     if (.not. this%sharing) return
-    do c = 1, this%classes%nclass
-      call class_dofs(this, b, c, dofs, n)
-      m = this%classes%moff(c + 1) - this%classes%moff(c)
-      fl(1) = fl(1) + 2*real(n, dp)**2*m
-      fl(2) = fl(2) + real(n, dp)**3
-    end do
+    call tmp%init(b, this%classes, 1/this%classes%scale)
+    fl(1) = tmp%flops_per_action()
+    fl(2) = sum(real(tmp%cn, dp)**3)
+    call tmp%free()
   end function shared_explicit_flops
 
-  !> Explicit local operators shared per class: S^_c = (K_reg^r)^{-1} of the
-  !> representative r restricted to the union of the dofs B touches in the
-  !> class (n_c of them), built as in build_explicit (MUMPS Schur complement,
-  !> LAPACK inverse) and stored full (n_c x n_c) for dgemm. Member s of the
-  !> class uses S^_c / c_s.
+  !> Explicit local operators shared per class (class_operator): S^_c =
+  !> (K_reg^r)^{-1} of the representative r restricted to the union U_c of
+  !> the dofs B touches in the class, built as in build_explicit (MUMPS Schur
+  !> complement, LAPACK inverse); member s uses S^_c / c_s.
   subroutine build_explicit_shared(this, b, subs, regularization)
     type(f_operator_t), intent(inout) :: this
     type(b_operator_t), intent(in) :: b
     type(subdomain_t), intent(in) :: subs(:)
     real(dp), intent(in) :: regularization
-    integer(ip), allocatable :: row(:), dof(:), cmap(:), dofs(:), irn(:), jcn(:), perm(:)
-    real(dp), allocatable :: val(:), a(:), sd(:, :)
+    integer(ip), allocatable :: cmap(:), dofs(:), irn(:), jcn(:), perm(:)
+    real(dp), allocatable :: a(:), sd(:, :)
     type(mumps_t) :: m
-    integer(ip) :: c, r, s, e, ne, n, i, j, k, kk, mm, wmax
+    integer(ip) :: c, r, n, i, j, k
     integer :: info
-    integer(i8) :: o
 
     this%storage = 'general'
-    this%n_local_rows = b%n_local_rows()
-    associate (cl => this%classes)
-      allocate (this%cn(cl%nclass), this%coff(cl%nclass + 1), this%eoff(this%nsub + 1))
-      ! entries of every subdomain, in the order of the subdomains
-      ne = 0
-      this%eoff(1) = 0
-      do s = 1, this%nsub
-        call b%subdomain_entries(s, row, dof, val)
-        ne = ne + size(row, kind=ip)
-        this%eoff(s + 1) = ne
+    call this%shared_op%init(b, this%classes, 1/this%classes%scale)
+    do c = 1, this%classes%nclass
+      r = this%classes%rep(c)
+      call this%shared_op%class_dofs(b, c, dofs)
+      n = size(dofs, kind=ip)
+      if (n == 0) cycle
+      if (allocated(cmap)) deallocate (cmap)
+      allocate (cmap(subs(r)%ndof))
+      cmap = 0
+      do i = 1, n
+        cmap(dofs(i)) = i
       end do
-      allocate (this%erow(ne), this%edof(ne), this%eval(ne))
-      this%coff(1) = 0
-      wmax = 1
-      do c = 1, cl%nclass
-        call class_dofs(this, b, c, dofs, n)
-        this%cn(c) = n
-        this%coff(c + 1) = this%coff(c) + int(n, i8)*n
-        mm = cl%moff(c + 1) - cl%moff(c)
-        wmax = max(wmax, n*mm)
+      call regularized_system(subs(r), regularization, 'amd', irn, jcn, a, perm)
+      if (allocated(sd)) deallocate (sd)
+      allocate (sd(n, n))
+      if (n == subs(r)%ndof) then
+        sd = 0
+        do k = 1, size(a, kind=ip)
+          i = cmap(irn(k))
+          j = cmap(jcn(k))
+          sd(i, j) = sd(i, j) + a(k)
+          if (i /= j) sd(j, i) = sd(j, i) + a(k)
+        end do
+      else
+        call timer_start('explicit F: Schur')
+        call m%init(MPI_COMM_SELF, spd=.true.)
+        call m%set_centralized(subs(r)%ndof, irn, jcn, a)
+        call m%set_ordering('amd')
+        call m%set_schur(dofs)
+        call m%factorize()
+        call m%schur_complement(sd)
+        this%build_flop_count = this%build_flop_count + m%factor_flops()
+        call m%free()
+        call timer_stop('explicit F: Schur')
+      end if
+      this%build_flop_count = this%build_flop_count + real(n, dp)**3
+      call timer_start('explicit F: inverse')
+      call dpotrf('U', n, sd, n, info)
+      if (info == 0) call dpotri('U', n, sd, n, info)
+      if (info /= 0) call fatal_error('f_operator%build_explicit: the Schur complement of K_reg is not '// &
+                                      'positive definite (LAPACK dpotrf/dpotri failed)')
+      call timer_stop('explicit F: inverse')
+      do j = 1, n
+        sd(j + 1:n, j) = sd(j, j + 1:n)
       end do
-      allocate (this%smat(this%coff(cl%nclass + 1)), this%xw(wmax), this%yw(wmax))
-      allocate (this%wloc(max(1, this%n_local_rows)), this%wloc2(max(1, this%n_local_rows)))
-      do c = 1, cl%nclass
-        r = cl%rep(c)
-        call class_dofs(this, b, c, dofs, n)
-        if (allocated(cmap)) deallocate (cmap)
-        allocate (cmap(subs(r)%ndof))
-        cmap = 0
-        do i = 1, n
-          cmap(dofs(i)) = i
-        end do
-        do kk = cl%moff(c) + 1, cl%moff(c + 1)
-          s = cl%member(kk)
-          call b%subdomain_entries(s, row, dof, val)
-          do e = 1, size(row, kind=ip)
-            this%erow(this%eoff(s) + e) = row(e)
-            this%edof(this%eoff(s) + e) = cmap(dof(e))
-            this%eval(this%eoff(s) + e) = val(e)
-          end do
-        end do
-        if (n == 0) cycle
-        call regularized_system(subs(r), regularization, 'amd', irn, jcn, a, perm)
-        if (allocated(sd)) deallocate (sd)
-        allocate (sd(n, n))
-        if (n == subs(r)%ndof) then
-          sd = 0
-          do k = 1, size(a, kind=ip)
-            i = cmap(irn(k))
-            j = cmap(jcn(k))
-            sd(i, j) = sd(i, j) + a(k)
-            if (i /= j) sd(j, i) = sd(j, i) + a(k)
-          end do
-        else
-          call timer_start('explicit F: Schur')
-          call m%init(MPI_COMM_SELF, spd=.true.)
-          call m%set_centralized(subs(r)%ndof, irn, jcn, a)
-          call m%set_ordering('amd')
-          call m%set_schur(dofs)
-          call m%factorize()
-          call m%schur_complement(sd)
-          this%build_flop_count = this%build_flop_count + m%factor_flops()
-          call m%free()
-          call timer_stop('explicit F: Schur')
-        end if
-        this%build_flop_count = this%build_flop_count + real(n, dp)**3
-        call timer_start('explicit F: inverse')
-        call dpotrf('U', n, sd, n, info)
-        if (info == 0) call dpotri('U', n, sd, n, info)
-        if (info /= 0) call fatal_error('f_operator%build_explicit: the Schur complement of K_reg is not '// &
-                                        'positive definite (LAPACK dpotrf/dpotri failed)')
-        call timer_stop('explicit F: inverse')
-        o = this%coff(c)
-        do j = 1, n
-          sd(j + 1:n, j) = sd(j, j + 1:n)
-          this%smat(o + int(j - 1, i8)*n + 1:o + int(j, i8)*n) = sd(:, j)
-        end do
-      end do
-    end associate
+      call this%shared_op%set_matrix(c, sd)
+    end do
     this%explicit = .true.
   end subroutine build_explicit_shared
 
-  !> y = sum_s B^_s S^_c(s) B^_s^T x / c_s: per class, the members' B^_s^T x
-  !> (divided by c_s) as the columns of X, Y = S^_c X by one dgemm, the rows
-  !> B^_s Y scatter-added.
-  subroutine apply_explicit_shared(this, b, x, y)
-    type(f_operator_t), intent(inout) :: this
-    type(b_operator_t), intent(inout) :: b
-    real(dp), intent(in) :: x(:)
-    real(dp), intent(inout) :: y(:)
-    integer(ip) :: c, n, m, kk, s, e, j
-    integer(i8) :: o
-    real(dp) :: w
-    call b%gather_rows(x, this%wloc)
-    this%wloc2 = 0
-    associate (cl => this%classes)
-      do c = 1, cl%nclass
-        n = this%cn(c)
-        m = cl%moff(c + 1) - cl%moff(c)
-        if (n == 0) cycle
-        this%xw(1:n*m) = 0
-        do kk = cl%moff(c) + 1, cl%moff(c + 1)
-          s = cl%member(kk)
-          o = int(kk - cl%moff(c) - 1, i8)*n
-          w = 1/cl%scale(s)
-          do e = this%eoff(s) + 1, this%eoff(s + 1)
-            j = this%edof(e)
-            this%xw(o + j) = this%xw(o + j) + w*this%eval(e)*this%wloc(this%erow(e))
-          end do
-        end do
-        call dgemm('N', 'N', n, m, n, 1.0_dp, this%smat(this%coff(c) + 1), n, this%xw, n, 0.0_dp, this%yw, n)
-        do kk = cl%moff(c) + 1, cl%moff(c + 1)
-          s = cl%member(kk)
-          o = int(kk - cl%moff(c) - 1, i8)*n
-          do e = this%eoff(s) + 1, this%eoff(s + 1)
-            this%wloc2(this%erow(e)) = this%wloc2(this%erow(e)) + this%eval(e)*this%yw(o + this%edof(e))
-          end do
-        end do
-      end do
-    end associate
-    call b%scatter_rows(this%wloc2, y)
-  end subroutine apply_explicit_shared
-
-  !> Bytes one shared explicit F action reads and writes on this rank: every
-  !> S^_c once (n_c^2 values: dgemm reads the full square), the entries of B
-  !> twice (16 bytes each), 4 passes over the local dual rows and X, Y
-  !> (zeroed, added to, written by dgemm, read: 4 n_c m_c values per class).
-  integer(i8) function shared_explicit_bytes(this, b)
-    type(f_operator_t), intent(in) :: this
-    type(b_operator_t), intent(in) :: b
-    integer(ip) :: c
-    shared_explicit_bytes = 2*16*b%n_entries() + 4*8*int(b%n_local_rows(), i8)
-    do c = 1, this%classes%nclass
-      shared_explicit_bytes = shared_explicit_bytes + 8*int(this%cn(c), i8)*this%cn(c) + &
-                              4*8*int(this%cn(c), i8)*(this%classes%moff(c + 1) - this%classes%moff(c))
-    end do
-  end function shared_explicit_bytes
 end module f_operator

@@ -99,6 +99,8 @@ module feti_operators
     procedure :: norm_pfp
     procedure :: f_applications
     procedure :: f_explicit
+    procedure :: f_shared
+    procedure :: f_classes
     procedure :: f_local_operator
     procedure :: setup_flops
     procedure :: coarse_solves
@@ -266,7 +268,11 @@ contains
     type(dual_preconditioner_t), intent(inout) :: prec
     character(len=*), intent(in) :: kind
     real(dp), intent(in) :: weights(:)
-    call prec%init(kind, this%b, this%subs, weights)
+    if (this%f%is_shared()) then
+      call prec%init(kind, this%b, this%subs, weights, this%f%classes_found())
+    else
+      call prec%init(kind, this%b, this%subs, weights)
+    end if
   end subroutine init_preconditioner
 
   ! ---- accessors ----
@@ -435,6 +441,20 @@ contains
     class(feti_t), intent(in) :: this
     f_explicit = this%f%is_explicit()
   end function f_explicit
+
+  !> True when K^+ (and the explicit operators) are shared per class of
+  !> congruent subdomains (`&solver share_subdomains`).
+  logical function f_shared(this)
+    class(feti_t), intent(in) :: this
+    f_shared = this%f%is_shared()
+  end function f_shared
+
+  !> Classes of congruent subdomains on this rank (= the local subdomains
+  !> without sharing).
+  integer(ip) function f_classes(this)
+    class(feti_t), intent(in) :: this
+    f_classes = this%f%n_classes()
+  end function f_classes
 
   !> The dense F^s of local subdomain `ls` on its local dual rows `rows`
   !> (explicit F only; for tests).
