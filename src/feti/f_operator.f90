@@ -79,6 +79,7 @@ module f_operator
     procedure :: n_classes
     procedure :: shared_explicit_flops
     procedure :: classes_found
+    procedure :: max_class_deviation
     procedure :: free
   end type f_operator_t
 
@@ -478,6 +479,12 @@ contains
     type(subdomain_classes_t) :: cl
     cl = this%classes
   end function classes_found
+
+  !> max |K_s - c_s K_r| / max |K_s| over the members of the classes.
+  real(dp) function max_class_deviation(this)
+    class(f_operator_t), intent(in) :: this
+    max_class_deviation = this%classes%max_deviation
+  end function max_class_deviation
 
   !> Flops of one shared explicit F action on this rank (2 n_c^2 m_c per
   !> class: the product S^_c X with m_c columns) and of its build (n_c^3 per

@@ -55,7 +55,13 @@ contains
       character(len=160) :: line
       write (line, '(a,i0,a,i0,a)') 'local subdomains: ', this%n_local_subs, ' in ', this%f%n_classes(), &
         ' classes of congruent subdomains'
-      if (this%f%is_shared()) line = trim(line)//' (K^+ shared per class)'
+      if (this%f%is_shared()) then
+        block
+          character(len=40) :: dev
+          write (dev, '(es9.2)') this%f%max_class_deviation()
+          line = trim(line)//' (K^+ shared per class; max |K_s - c_s K_r| / max |K_s| ='//trim(dev)//')'
+        end block
+      end if
       call log_message(line)
     end block
     call timer_stop('factorization')
@@ -135,7 +141,12 @@ contains
 
   !> `&solver f_action`: build the explicit local operators for 'explicit',
   !> or for 'auto' when the cost model says they pay (the same choice on all
-  !> ranks, from global sums). The model, measured (docs/RESULTS.md, "Speed
+  !> ranks, from global sums). With K^+ shared per class on every rank
+  !> (`share_subdomains`), the explicit action is one dgemm per class
+  !> (compute bound) against the implicit one's streaming of the factors
+  !> (memory bound): explicit when its flops per action are at most
+  !> `shared_flops_per_byte` times the implicit bytes (docs/RESULTS.md
+  !> "Shared local operators (issue 16)"). Otherwise: The model, measured (docs/RESULTS.md, "Speed
   !> (issue 16)"): both F actions are memory bound, so one explicit action
   !> saves time in proportion to the bytes it saves, I - E (implicit minus
   !> explicit bytes per action); the build costs in proportion to sum n_d^3
