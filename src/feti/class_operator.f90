@@ -12,7 +12,10 @@
 !> the inverse of K_reg's Schur complement, a_s = 1/c_s) and by
 !> dual_preconditioner ('lumped': M_c = K_r(U_c, U_c), a_s = c_s / w_s^2).
 !> The class's matrix is read once per application for all its members, so
-!> the work is compute bound (dgemm) instead of memory bound.
+!> the work is compute bound (dgemm) instead of memory bound. A sparse M_c
+!> (set_sparse: CSR, the lumped preconditioner's K_r(U_c, U_c)) is applied
+!> with the members' vectors as the rows of X^T (m_c x n_c): one contiguous
+!> axpy of length m_c per entry of M_c.
 module class_operator
   use kinds, only: dp, ip, i8
   use lapack_interfaces, only: dgemm
@@ -20,6 +23,7 @@ module class_operator
   use b_operator, only: b_operator_t
   use sorting, only: sort_unique
   use subdomain_classes, only: subdomain_classes_t
+  use csr_matrix, only: csr_t
   implicit none
   private
 
@@ -33,11 +37,14 @@ module class_operator
     integer(ip), allocatable :: erow(:), edof(:)  !< local dual row, dof in U_c (1..n_c)
     real(dp), allocatable :: eval(:)
     integer(ip) :: n_local_rows = 0
+    logical :: sparse = .false.                   !< M_c in CSR (set_sparse) instead of dense
+    type(csr_t), allocatable :: smat(:)           !< (nclass) sparse M_c
     real(dp), allocatable, private :: xw(:), yw(:), wloc(:), wloc2(:)
   contains
     procedure :: init
     procedure :: class_dofs
     procedure :: set_matrix
+    procedure :: set_sparse
     procedure :: apply
     procedure :: local_matrix
     procedure :: bytes_per_action
@@ -138,6 +145,19 @@ contains
     this%mat(this%coff(c) + 1:this%coff(c + 1)) = reshape(m, [int(n, i8)*n])
   end subroutine set_matrix
 
+  !> M_c = `m` (n_c x n_c CSR, symmetric, both triangles); then every class
+  !> must be set this way (the dense storage is released).
+  subroutine set_sparse(this, c, m)
+    class(class_operator_t), intent(inout) :: this
+    integer(ip), intent(in) :: c
+    type(csr_t), intent(in) :: m
+    if (m%nrows /= this%cn(c) .or. m%ncols /= this%cn(c)) call fatal_error('class_operator%set_sparse: n_c x n_c expected')
+    if (.not. allocated(this%smat)) allocate (this%smat(this%classes%nclass))
+    this%smat(c) = m
+    this%sparse = .true.
+    if (allocated(this%mat)) deallocate (this%mat)
+  end subroutine set_sparse
+
   !> y = sum_s a_s B^_s M_c(s) B^_s^T x (dual vectors, owned rows). Collective
   !> (the neighbour exchange of B).
   subroutine apply(this, b, x, y)
@@ -155,6 +175,10 @@ contains
         n = this%cn(c)
         m = cl%moff(c + 1) - cl%moff(c)
         if (n == 0) cycle
+        if (this%sparse) then
+          call apply_sparse(c, n, m, this%xw, this%yw)
+          cycle
+        end if
         this%xw(1:n*m) = 0
         do kk = cl%moff(c) + 1, cl%moff(c + 1)
           s = cl%member(kk)
@@ -176,6 +200,38 @@ contains
       end do
     end associate
     call b%scatter_rows(this%wloc2, y)
+  contains
+    !> Class c with a sparse M_c: X^T and Y^T are m x n (member, dof).
+    subroutine apply_sparse(c, n, m, xt, yt)
+      integer(ip), intent(in) :: c, n, m
+      real(dp), intent(inout) :: xt(m, n), yt(m, n)
+      integer(ip) :: i, k, col
+      associate (cl => this%classes, a => this%smat(c))
+        xt = 0
+        do kk = cl%moff(c) + 1, cl%moff(c + 1)
+          s = cl%member(kk)
+          col = kk - cl%moff(c)
+          w = this%factor(s)
+          do e = this%eoff(s) + 1, this%eoff(s + 1)
+            j = this%edof(e)
+            xt(col, j) = xt(col, j) + w*this%eval(e)*this%wloc(this%erow(e))
+          end do
+        end do
+        do i = 1, n
+          yt(:, i) = 0
+          do k = a%rowptr(i), a%rowptr(i + 1) - 1
+            yt(:, i) = yt(:, i) + a%values(k)*xt(:, a%colind(k))
+          end do
+        end do
+        do kk = cl%moff(c) + 1, cl%moff(c + 1)
+          s = cl%member(kk)
+          col = kk - cl%moff(c)
+          do e = this%eoff(s) + 1, this%eoff(s + 1)
+            this%wloc2(this%erow(e)) = this%wloc2(this%erow(e)) + this%eval(e)*yt(col, this%edof(e))
+          end do
+        end do
+      end associate
+    end subroutine apply_sparse
   end subroutine apply
 
   !> The dense a_s B^_s M_c B^_s^T of local subdomain `s` on its local dual
@@ -190,6 +246,7 @@ contains
     c = this%classes%class_of(s)
     n = this%cn(c)
     o = this%coff(c)
+    if (this%sparse) call fatal_error('class_operator%local_matrix: dense storage only')
     nb = this%eoff(s + 1) - this%eoff(s)
     rows = this%erow(this%eoff(s) + 1:this%eoff(s + 1))
     allocate (fs(nb, nb))
@@ -212,6 +269,11 @@ contains
     integer(ip) :: c
     bytes_per_action = 2*16*int(size(this%erow), i8) + 4*8*int(this%n_local_rows, i8)
     do c = 1, this%classes%nclass
+      if (this%sparse) then
+        bytes_per_action = bytes_per_action + 12*int(this%smat(c)%nnz(), i8) + &
+                           4*8*int(this%cn(c), i8)*(this%classes%moff(c + 1) - this%classes%moff(c))
+        cycle
+      end if
       bytes_per_action = bytes_per_action + 8*int(this%cn(c), i8)*this%cn(c) + &
                          4*8*int(this%cn(c), i8)*(this%classes%moff(c + 1) - this%classes%moff(c))
     end do
@@ -223,6 +285,11 @@ contains
     integer(ip) :: c
     flops_per_action = 0
     do c = 1, this%classes%nclass
+      if (this%sparse) then
+        flops_per_action = flops_per_action + 2*real(this%smat(c)%nnz(), dp)*(this%classes%moff(c + 1) - &
+                                                                              this%classes%moff(c))
+        cycle
+      end if
       flops_per_action = flops_per_action + 2*real(this%cn(c), dp)**2*(this%classes%moff(c + 1) - this%classes%moff(c))
     end do
   end function flops_per_action
@@ -234,6 +301,8 @@ contains
     if (allocated(this%factor)) deallocate (this%factor)
     if (allocated(this%eoff)) deallocate (this%eoff, this%erow, this%edof, this%eval)
     if (allocated(this%xw)) deallocate (this%xw, this%yw, this%wloc, this%wloc2)
+    if (allocated(this%smat)) deallocate (this%smat)
+    this%sparse = .false.
     this%classes = subdomain_classes_t()
     this%n_local_rows = 0
   end subroutine free

@@ -14,9 +14,9 @@
 !> Applied like F: dual vector -> B^T (neighbour exchange) -> local ->
 !> B (exchange back). 'lumped' with classes of congruent subdomains
 !> (`&solver share_subdomains`, K_s = c_s K_r): A_s restricted to the dofs B
-!> touches is c_s K_r(U_c, U_c), applied to all the members of a class by one
-!> dgemm (class_operator, dense K_r on the union U_c of the class's touched
-!> dofs).
+!> touches is c_s K_r(U_c, U_c), applied to all the members of a class at
+!> once (class_operator, K_r on the union U_c of the class's touched dofs in
+!> CSR, read once per application for all members).
 !>
 !> Contact rows (constraints: spread over all copies of their node with the
 !> gluing weights, entries v_c = -w_c/sqrt(S), S = sum_c w_c) are orthogonal
@@ -47,6 +47,7 @@ module dual_preconditioner
   use schur_complement, only: schur_complement_t
   use subdomain_classes, only: subdomain_classes_t
   use class_operator, only: class_operator_t
+  use csr_matrix, only: csr_t
   implicit none
   private
 
@@ -119,34 +120,51 @@ contains
     end if
   end subroutine init
 
-  !> 'lumped' per class: M_c = K_r(U_c, U_c) dense, a_s = c_s / w_s^2.
+  !> 'lumped' per class: M_c = K_r(U_c, U_c) in CSR, a_s = c_s / w_s^2.
   subroutine init_shared(this, b, subs, classes)
     class(dual_preconditioner_t), intent(inout) :: this
     type(b_operator_t), intent(in) :: b
     type(subdomain_t), intent(in) :: subs(:)
     type(subdomain_classes_t), intent(in) :: classes
     integer(ip), allocatable :: dofs(:), cmap(:)
-    real(dp), allocatable :: m(:, :)
-    integer(ip) :: c, r, i, k, n, j
+    type(csr_t) :: m
+    integer(ip) :: c, r, i, k, n, j, nz
     call this%shared_op%init(b, classes, classes%scale*this%inv_w**2)
     do c = 1, classes%nclass
       r = classes%rep(c)
       call this%shared_op%class_dofs(b, c, dofs)
       n = size(dofs, kind=ip)
-      allocate (cmap(subs(r)%ndof), m(n, n))
+      allocate (cmap(subs(r)%ndof))
       cmap = 0
       do i = 1, n
         cmap(dofs(i)) = i
       end do
-      m = 0
+      ! K_r(U_c, U_c): the rows of U_c, the columns in U_c renumbered (ascending stays ascending)
+      m%nrows = n
+      m%ncols = n
+      allocate (m%rowptr(n + 1))
+      m%rowptr(1) = 1
       do i = 1, n
+        nz = 0
+        do k = subs(r)%K%rowptr(dofs(i)), subs(r)%K%rowptr(dofs(i) + 1) - 1
+          if (cmap(subs(r)%K%colind(k)) > 0) nz = nz + 1
+        end do
+        m%rowptr(i + 1) = m%rowptr(i) + nz
+      end do
+      allocate (m%colind(m%rowptr(n + 1) - 1), m%values(m%rowptr(n + 1) - 1))
+      do i = 1, n
+        nz = m%rowptr(i)
         do k = subs(r)%K%rowptr(dofs(i)), subs(r)%K%rowptr(dofs(i) + 1) - 1
           j = cmap(subs(r)%K%colind(k))
-          if (j > 0) m(i, j) = subs(r)%K%values(k)
+          if (j == 0) cycle
+          m%colind(nz) = j
+          m%values(nz) = subs(r)%K%values(k)
+          nz = nz + 1
         end do
       end do
-      call this%shared_op%set_matrix(c, m)
-      deallocate (cmap, m)
+      call this%shared_op%set_sparse(c, m)
+      call m%free()
+      deallocate (cmap)
     end do
     this%shared = .true.
   end subroutine init_shared

@@ -80,6 +80,7 @@ module f_operator
     procedure :: shared_explicit_flops
     procedure :: classes_found
     procedure :: max_class_deviation
+    procedure :: flops_per_action
     procedure :: free
   end type f_operator_t
 
@@ -479,6 +480,14 @@ contains
     type(subdomain_classes_t) :: cl
     cl = this%classes
   end function classes_found
+
+  !> Flops of one F action on this rank with the shared explicit operators
+  !> (2 n_c^2 m_c per class); 0 on the other paths (memory bound).
+  real(dp) function flops_per_action(this)
+    class(f_operator_t), intent(in) :: this
+    flops_per_action = 0
+    if (this%explicit .and. this%sharing) flops_per_action = this%shared_op%flops_per_action()
+  end function flops_per_action
 
   !> max |K_s - c_s K_r| / max |K_s| over the members of the classes.
   real(dp) function max_class_deviation(this)

@@ -70,6 +70,7 @@ module feti_operators
     procedure :: apply_abs_b
     procedure :: local_solve
     procedure :: bytes_per_f_action
+    procedure :: flops_per_f_action
     procedure :: keyed_random
     procedure :: init_active_coarse
     procedure :: init_orthonormal
@@ -233,6 +234,13 @@ contains
     class(feti_t), intent(in) :: this
     bytes_per_f_action = this%f%bytes_per_action(this%b)
   end function bytes_per_f_action
+
+  !> Flops of one F action on this rank when it is one dgemm per class
+  !> (shared explicit operators); 0 otherwise.
+  real(dp) function flops_per_f_action(this)
+    class(feti_t), intent(in) :: this
+    flops_per_f_action = this%f%flops_per_action()
+  end function flops_per_f_action
 
   !> A dual vector with entries in [-1, 1] that depend only on the rows'
   !> canonical keys (the same on any number of ranks).
