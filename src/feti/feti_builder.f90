@@ -158,7 +158,7 @@ contains
     class(feti_t), intent(inout) :: this
     type(params_t), intent(in) :: p
     real(dp), parameter :: payback_flops_per_byte = 150
-    real(dp), parameter :: shared_flops_per_byte = 1.0_dp
+    real(dp), parameter :: shared_flops_per_byte = 8
     integer(i8) :: mine(3), all(3)
     integer(ip), allocatable :: nd(:)
     integer :: ierr, sharing
