@@ -606,9 +606,11 @@ contains
       if (.not. one_of(m%mapping, [character(len=8) :: 'block', 'metis'])) &
         call fail('mesh', 'mapping', "must be 'block' or 'metis'", m%mapping)
       if (any(m%cluster < 1)) call fail('mesh', 'cluster', 'each entry must be >= 1', ints(m%cluster))
-      if (status == 0 .and. any(mod(m%nsub, m%cluster) /= 0)) &
-        call fail('mesh', 'cluster', 'must divide nsub in every direction (nsub = '//ints(m%nsub)//')', &
-                  ints(m%cluster))
+      if (status == 0) then     ! (no short-circuit in Fortran: mod only with cluster >= 1)
+        if (any(mod(m%nsub, m%cluster) /= 0)) &
+          call fail('mesh', 'cluster', 'must divide nsub in every direction (nsub = '//ints(m%nsub)//')', &
+                    ints(m%cluster))
+      end if
       if (any(m%cluster > 1)) then
         if (m%decomposition /= 'box') call fail('mesh', 'cluster', &
           "> 1 (hybrid TFETI) needs decomposition = 'box'", ints(m%cluster))
