@@ -73,7 +73,6 @@ module dual_problem
     procedure :: penalty
     procedure :: set_penalty
     procedure :: eq_size
-    procedure :: eq_residual_of
     procedure :: eq_residual
     procedure :: eq_apply_t
     procedure :: eq_measure
@@ -333,18 +332,6 @@ contains
     call MPI_Allreduce(mine, total, 1, MPI_REAL_DP, MPI_SUM, self%comm, ierr)
     cnorm = sqrt(max(total, 0.0_dp))
   end subroutine eq_residual
-
-  !> z = (G G^T)^{-1} G y for any y: one coarse solve, the tracked values of
-  !> the iterate untouched (SMALBE's face-preconditioned multiplier update).
-  subroutine eq_residual_of(self, y, z)
-    class(dual_problem_t), intent(inout) :: self
-    real(dp), intent(in) :: y(:)
-    real(dp), intent(out) :: z(:)
-    real(dp), allocatable :: gy(:)
-    allocate (gy(self%op%n_coarse()))
-    call self%op%apply_g(y, gy)
-    call self%op%coarse_solve(gy, z)
-  end subroutine eq_residual_of
 
   !> C x = 0 of the per-component stopping test. G nu = R^T (B^T lambda - f)
   !> per subdomain (lambda = nu + lambda~, G lambda~ = R^T f) is the force that

@@ -31,7 +31,6 @@ module dual_problem_orth
     procedure :: apply_projector
     procedure :: eq_size
     procedure :: eq_residual
-    procedure :: eq_residual_of
     procedure :: eq_apply_t
     procedure :: alpha_bar
     procedure :: free
@@ -74,14 +73,6 @@ contains
     call self%orth%apply(x, z)
     cnorm = norm2(z(1:self%orth%dimension()))
   end subroutine eq_residual
-
-  !> z = G~ y for any y (no tracked values here).
-  subroutine eq_residual_of(self, y, z)
-    class(dual_problem_orth_t), intent(inout) :: self
-    real(dp), intent(in) :: y(:)
-    real(dp), intent(out) :: z(:)
-    call self%orth%apply(y, z)
-  end subroutine eq_residual_of
 
   !> y = G~^T mu (local, no communication).
   subroutine eq_apply_t(self, muhat, y)

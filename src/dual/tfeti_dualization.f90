@@ -67,9 +67,7 @@ contains
                           alpha_scale=sp%alpha_scale, expansion=sp%expansion, m_scale=sp%m_scale, &
                           beta=sp%beta, eta_scale=sp%eta_scale, m_no_step=sp%m_no_step, &
                           rho_growth=sp%rho_growth, rho_contraction=sp%rho_contraction, &
-                          rho_window=sp%rho_window, rho_stall=sp%rho_stall, mu_update=sp%mu_update, &
-                          mu_step=sp%mu_step, mu_momentum=sp%mu_momentum, &
-                          mu_face_iterations=sp%mu_face_iterations, mu_face_tol=sp%mu_face_tol, &
+                          rho_window=sp%rho_window, rho_stall=sp%rho_stall, &
                           monitor=sp%monitor)
   end function smalbe_settings
 

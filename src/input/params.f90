@@ -76,13 +76,6 @@ module params
     integer(ip) :: rho_window = 10
     !> > 0: the first raise only on a stall (contraction worse than this over rho_window), later ones per iteration
     real(dp) :: rho_stall = 0.95_dp
-    !> SMALBE's multiplier update: 'plain' (mu <- mu + rho C x) | 'nesterov'
-    !> (extrapolated, with gradient restart; docs/RESULTS.md "Accelerated multiplier update")
-    character(len=name_len) :: mu_update = 'plain'
-    real(dp) :: mu_step = 1                   !< 'plain': mu <- mu + mu_step rho C x + mu_momentum (mu - mu_old)
-    real(dp) :: mu_momentum = 0
-    integer(ip) :: mu_face_iterations = 10    !< 'face': CG steps of the face solve (at most)
-    real(dp) :: mu_face_tol = 0.1_dp          !< 'face': its relative residual
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
@@ -481,14 +474,14 @@ contains
     character(len=*), intent(out), optional :: written(:)
     logical :: reading
     integer(ip) :: nsub(3), nel(3), distortion_seed, seed, max_outer, max_hessian, power_iterations, coarse_ranks, &
-                   rho_window, mu_face_iterations
+                   rho_window
     real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, rho_growth, &
-                rho_contraction, rho_stall, mu_step, mu_momentum, mu_face_tol, coarse_blr, &
+                rho_contraction, rho_stall, coarse_blr, &
                 regularization, active_tol, kkt_tol
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
-                               m_no_step, f_action, f_storage, preconditioner, mu_update
+                               m_no_step, f_action, f_storage, preconditioner
     character(len=path_len) :: directory
     logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report, coarse_ooc
     namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping
@@ -497,9 +490,8 @@ contains
     namelist /boundary/ top_dirichlet, top_displacement, symmetry_x0, symmetry_y0
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
-      m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, rho_window, rho_stall, mu_update, mu_step, mu_momentum, &
-      mu_face_iterations, mu_face_tol, power_iterations, &
-      coarse, coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
+      m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, rho_window, rho_stall, power_iterations, coarse, &
+      coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
       f_action, f_storage, &
       regularization, scaling, stopping, preconditioner, monitor
     namelist /reconstruction/ method, active_tol, kkt_tol
@@ -541,8 +533,7 @@ contains
         alpha_scale = s%alpha_scale; expansion = s%expansion; rho_scale = s%rho_scale
         m_scale = s%m_scale; beta = s%beta; eta_scale = s%eta_scale; m_no_step = s%m_no_step
         rho_growth = s%rho_growth; rho_contraction = s%rho_contraction; rho_window = s%rho_window
-        rho_stall = s%rho_stall; mu_update = s%mu_update; mu_step = s%mu_step; mu_momentum = s%mu_momentum
-        mu_face_iterations = s%mu_face_iterations; mu_face_tol = s%mu_face_tol
+        rho_stall = s%rho_stall
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
         f_action = s%f_action; f_storage = s%f_storage
@@ -580,9 +571,7 @@ contains
     case ('solver')
       p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
                                  rho_scale, m_scale, beta, eta_scale, lower(m_no_step), rho_growth, &
-                                 rho_contraction, rho_window, rho_stall, lower(mu_update), mu_step, mu_momentum, &
-                                 mu_face_iterations, mu_face_tol, &
-                                 power_iterations, &
+                                 rho_contraction, rho_window, rho_stall, power_iterations, &
                                  lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
                                  lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, &
@@ -658,14 +647,6 @@ contains
       if (s%rho_window < 1) call fail('solver', 'rho_window', 'must be >= 1', ints([s%rho_window]))
       if (.not. (s%rho_stall >= 0 .and. s%rho_stall < 1)) &
         call fail('solver', 'rho_stall', 'must be in [0, 1) (0: off)', reals([s%rho_stall]))
-      if (.not. one_of(s%mu_update, [character(len=8) :: 'plain', 'nesterov', 'face'])) &
-        call fail('solver', 'mu_update', "must be 'plain', 'nesterov' or 'face'", s%mu_update)
-      if (s%mu_face_iterations < 1) call fail('solver', 'mu_face_iterations', 'must be >= 1', ints([s%mu_face_iterations]))
-      if (.not. (s%mu_face_tol > 0 .and. s%mu_face_tol < 1)) &
-        call fail('solver', 'mu_face_tol', 'must be in (0, 1)', reals([s%mu_face_tol]))
-      if (.not. (s%mu_step > 0 .and. s%mu_step < 2)) call fail('solver', 'mu_step', 'must be in (0, 2)', reals([s%mu_step]))
-      if (.not. (s%mu_momentum >= 0 .and. s%mu_momentum < 1)) &
-        call fail('solver', 'mu_momentum', 'must be in [0, 1)', reals([s%mu_momentum]))
       if (s%power_iterations < 1) &
         call fail('solver', 'power_iterations', 'must be >= 1', ints([s%power_iterations]))
       if (.not. one_of(s%coarse, [character(len=8) :: 'mumps', 'cholesky'])) &

@@ -104,7 +104,6 @@ module qp_problem
     procedure :: set_penalty => default_set_penalty
     procedure :: eq_size => default_eq_size
     procedure :: eq_residual => default_eq_residual
-    procedure :: eq_residual_of => default_eq_residual_of
     procedure :: eq_apply_t => default_eq_apply_t
     procedure :: track_last => default_track
     procedure :: track_step => default_track_step
@@ -235,17 +234,6 @@ contains
     z = 0
     cnorm = 0
   end subroutine default_eq_residual
-
-  !> z of eq_residual for an arbitrary vector y (not the solver's iterate):
-  !> C^T C y = eq_apply_t(z). By default eq_residual itself; a problem whose
-  !> eq_residual reuses values tracked for the iterate overrides it.
-  subroutine default_eq_residual_of(self, y, z)
-    class(qp_problem_t), intent(inout) :: self
-    real(dp), intent(in) :: y(:)
-    real(dp), intent(out) :: z(:)
-    real(dp) :: cnorm
-    call self%eq_residual(y, z, cnorm)
-  end subroutine default_eq_residual_of
 
   subroutine default_eq_apply_t(self, muhat, y)
     class(qp_problem_t), intent(inout) :: self

@@ -79,7 +79,7 @@ module smalbe
   use kinds, only: dp, ip, name_len
   use errors, only: fatal_error
   use logger, only: log_message
-  use qp_problem, only: qp_problem_t, qp_solver_t, qp_message_len, compensated_add, qp_status_converged, no_lower_bound, &
+  use qp_problem, only: qp_problem_t, qp_solver_t, qp_message_len, compensated_add, qp_status_converged, &
                         qp_status_max_hessian, qp_status_max_outer, qp_status_not_finite, &
                         qp_status_incompatible, qp_status_not_run
   use mprgp, only: mprgp_t, mprgp_stop_t, ensure_size
@@ -134,17 +134,6 @@ module smalbe
     !> rho_stall^w ||C x_{k-w}||; after it the per-iteration test with
     !> rho_contraction (w = 1). 0: every raise uses rho_contraction and w
     real(dp) :: rho_stall = 0
-    !> the multiplier update: 'plain' (mu <- mu + rho C x) or 'nesterov' (the
-    !> same step from an extrapolated multiplier, restarted when the step
-    !> opposes the momentum; see the module)
-    character(len=name_len) :: mu_update = 'plain'
-    !> 'plain' only: mu_{k+1} = mu_k + mu_step rho C x_k + mu_momentum (mu_k - mu_{k-1}),
-    !> the momentum dropped for one step when it opposes C x_k (1 and 0: SMALBE)
-    real(dp) :: mu_step = 1
-    real(dp) :: mu_momentum = 0
-    !> 'face': CG steps (at most) and relative residual of the face solve
-    integer(ip) :: mu_face_iterations = 10
-    real(dp) :: mu_face_tol = 0.1_dp
     logical :: monitor = .false.               !< one line per outer iteration and a summary
   end type smalbe_settings_t
 
@@ -165,15 +154,6 @@ module smalbe
     real(dp) :: rho_contraction = 0.5_dp       !< raise rho when ||C x|| shrinks by less than this
     integer(ip) :: rho_window = 1              !< ... per outer iteration over this many (see smalbe_settings_t)
     real(dp) :: rho_stall = 0                  !< > 0: first raise on a stall only (see smalbe_settings_t)
-    character(len=name_len) :: mu_update = 'plain' !< 'plain' | 'nesterov' (see smalbe_settings_t)
-    real(dp) :: mu_step = 1                    !< see smalbe_settings_t
-    real(dp) :: mu_momentum = 0                !< see smalbe_settings_t
-    integer(ip) :: n_mu_restarts = 0           !< momentum restarts ('nesterov', or mu_momentum > 0)
-    integer(ip) :: mu_face_iterations = 10     !< see smalbe_settings_t
-    real(dp) :: mu_face_tol = 0.1_dp           !< see smalbe_settings_t
-    integer(ip) :: n_face_cg = 0               !< 'face': CG steps of the multiplier updates (one eq_residual_of each)
-    integer(ip) :: n_face_updates = 0          !< 'face': updates made on the face (the others were plain)
-    logical, allocatable, private :: active_prev(:)  !< 'face': the active set of the previous outer iteration
     real(dp) :: rho_initial = 0                !< problem%penalty() at the start of the last solve
     integer(ip) :: n_rho_updates = 0           !< times rho was raised
     integer(ip) :: max_outer = 200             !< cap of outer iterations
@@ -212,8 +192,7 @@ module smalbe
     real(dp), allocatable :: cnorm_history(:)
     integer(ip), allocatable :: hessian_history(:)
     real(dp), allocatable :: rho_history(:)    !< the penalty of outer iteration k's inner solve
-    real(dp), allocatable, private :: b_lin(:), ct_mu(:), ct_new(:), x_prev(:), g_prev(:), ct_z(:)
-    real(dp), allocatable, private :: nu_prev(:), nu_new(:)   !< 'nesterov': the plain sequence (hat form)
+    real(dp), allocatable, private :: b_lin(:), ct_mu(:), ct_new(:), x_prev(:), g_prev(:)
     type(smalbe_inner_stop_t), private :: rule
   contains
     procedure :: init => smalbe_init
@@ -300,15 +279,15 @@ contains
   !> (default 0.1); monitor: one line per outer iteration and a summary.
   subroutine smalbe_init(self, a_norm, tol, max_outer, max_hessian, gamma, alpha_scale, expansion, &
                          m_scale, beta, eta_scale, monitor, m_no_step, rho_growth, rho_contraction, rho_window, &
-                         rho_stall, mu_update, mu_step, mu_momentum, mu_face_iterations, mu_face_tol)
+                         rho_stall)
     class(smalbe_t), intent(inout) :: self
     real(dp), intent(in) :: a_norm, tol
     integer(ip), intent(in) :: max_outer, max_hessian
     real(dp), intent(in), optional :: gamma, alpha_scale, m_scale, beta, eta_scale, rho_growth, rho_contraction, &
-                                      rho_stall, mu_step, mu_momentum, mu_face_tol
-    character(len=*), intent(in), optional :: expansion, m_no_step, mu_update
+                                      rho_stall
+    character(len=*), intent(in), optional :: expansion, m_no_step
     logical, intent(in), optional :: monitor
-    integer(ip), intent(in), optional :: rho_window, mu_face_iterations
+    integer(ip), intent(in), optional :: rho_window
 
     call self%free()
     call self%inner%init(a_norm, tol, max_hessian, gamma, alpha_scale, expansion, monitor=.false.)
@@ -334,16 +313,6 @@ contains
     if (present(rho_window)) self%rho_window = rho_window
     self%rho_stall = 0
     if (present(rho_stall)) self%rho_stall = rho_stall
-    self%mu_update = 'plain'
-    if (present(mu_update)) self%mu_update = mu_update
-    self%mu_step = 1
-    if (present(mu_step)) self%mu_step = mu_step
-    self%mu_momentum = 0
-    if (present(mu_momentum)) self%mu_momentum = mu_momentum
-    self%mu_face_iterations = 10
-    if (present(mu_face_iterations)) self%mu_face_iterations = mu_face_iterations
-    self%mu_face_tol = 0.1_dp
-    if (present(mu_face_tol)) self%mu_face_tol = mu_face_tol
 
     if (.not. (tol > 0 .and. tol < 1)) call fatal_error('smalbe: tol must be in (0, 1)')
     if (max_outer < 1) call fatal_error('smalbe: max_outer must be >= 1')
@@ -361,16 +330,6 @@ contains
       call fatal_error('smalbe: rho_contraction must be in (0, 1)')
     if (self%rho_window < 1) call fatal_error('smalbe: rho_window must be >= 1')
     if (.not. (self%rho_stall >= 0 .and. self%rho_stall < 1)) call fatal_error('smalbe: rho_stall must be in [0, 1)')
-    select case (self%mu_update)
-    case ('plain', 'nesterov', 'face')
-    case default
-      call fatal_error("smalbe: mu_update must be 'plain', 'nesterov' or 'face'")
-    end select
-    if (.not. (self%mu_step > 0 .and. self%mu_step < 2)) call fatal_error('smalbe: mu_step must be in (0, 2)')
-    if (.not. (self%mu_momentum >= 0 .and. self%mu_momentum < 1)) &
-      call fatal_error('smalbe: mu_momentum must be in [0, 1)')
-    if (self%mu_face_iterations < 1) call fatal_error('smalbe: mu_face_iterations must be >= 1')
-    if (.not. (self%mu_face_tol > 0 .and. self%mu_face_tol < 1)) call fatal_error('smalbe: mu_face_tol must be in (0, 1)')
   end subroutine smalbe_init
 
   !> The settings `s` at once, with ||A|| = a_norm (penalty included).
@@ -380,8 +339,7 @@ contains
     real(dp), intent(in) :: a_norm
     call self%init(a_norm, s%tol, s%max_outer, s%max_hessian, s%gamma, s%alpha_scale, s%expansion, &
                    s%m_scale, s%beta, s%eta_scale, s%monitor, s%m_no_step, s%rho_growth, s%rho_contraction, &
-                   s%rho_window, s%rho_stall, s%mu_update, s%mu_step, s%mu_momentum, &
-                   s%mu_face_iterations, s%mu_face_tol)
+                   s%rho_window, s%rho_stall)
   end subroutine smalbe_init_with
 
   subroutine smalbe_free(self)
@@ -394,9 +352,6 @@ contains
     if (allocated(self%ct_new)) deallocate (self%ct_new)
     if (allocated(self%x_prev)) deallocate (self%x_prev)
     if (allocated(self%g_prev)) deallocate (self%g_prev)
-    if (allocated(self%ct_z)) deallocate (self%ct_z)
-    if (allocated(self%nu_prev)) deallocate (self%nu_prev)
-    if (allocated(self%nu_new)) deallocate (self%nu_new)
     if (allocated(self%rule%z)) deallocate (self%rule%z)
     self%status = qp_status_not_run
     self%message = 'not run'
@@ -437,7 +392,7 @@ contains
     class(qp_problem_t), intent(inout) :: problem
     real(dp), intent(inout) :: x(:)
     character(len=qp_message_len) :: reason, buf
-    real(dp) :: scale, lagr, change, m_now, q, s(2), hi(2), lo(2), l_shift, rho_old, t_mom, t_next, mom, l_next
+    real(dp) :: scale, lagr, change, m_now, q, s(2), hi(2), lo(2), l_shift, rho_old
     integer(ip) :: n, m, outer, i, n_idle, last_raise, w
     logical :: gradient_given, failed, raise
 
@@ -457,9 +412,6 @@ contains
     call ensure_size(self%ct_new, n)
     call ensure_size(self%x_prev, n)
     call ensure_size(self%g_prev, n)
-    call ensure_size(self%ct_z, n)
-    call ensure_size(self%nu_prev, m)
-    call ensure_size(self%nu_new, m)
     call ensure_size(self%muhat, m)
     call ensure_size(self%rule%z, m)
 
@@ -498,8 +450,6 @@ contains
     self%m_initial = self%m_scale*self%a_norm
     m_now = self%m_initial
     self%muhat = 0
-    self%nu_prev = 0
-    t_mom = 1
     self%ct_mu = 0
     self%b_lin(1:n) = problem%b(1:n)
     self%rule%tol_gp = self%tol_gp
@@ -599,73 +549,9 @@ contains
         exit
       end if
 
-      ! 3. multiplier update; the gradient follows without a Hessian product.
-      ! 'plain': mu_{k+1} = mu_k + rho C x_k, and L(x_k, mu_{k+1}) - L(x_k, mu_k)
-      ! = rho ||C x_k||^2. 'nesterov': nu_{k+1} = mu_k + rho C x_k is the plain
-      ! step from the extrapolated mu_k, and mu_{k+1} = nu_{k+1} + (t_k - 1)/t_{k+1}
-      ! (nu_{k+1} - nu_k), t_{k+1} = (1 + sqrt(1 + 4 t_k^2))/2 (FISTA on the
-      ! dual function, whose gradient is C x(mu) with Lipschitz constant 1/rho);
-      ! the momentum restarts (t = 1, mu_{k+1} = nu_{k+1}) when the step C x_k
-      ! opposes nu_{k+1} - nu_k, i.e. (C x_k)^T (nu_{k+1} - nu_k) <= 0 (gradient
-      ! restart), and L(x_k, mu_{k+1}) - L(x_k, mu_k) = (C x_k)^T (mu_{k+1} - mu_k).
-      ! In hat form (C x)^T mu = (C^T C x)^T (C^T mu) = eq_apply_t(z)^T eq_apply_t(muhat).
-      if (self%mu_update == 'nesterov') then
-        self%nu_new(1:m) = self%muhat(1:m) + self%mu_step*self%rho*self%rule%z(1:m)
-        call problem%eq_apply_t(self%rule%z, self%ct_z)
-        self%muhat(1:m) = self%nu_new(1:m) - self%nu_prev(1:m)
-        call problem%eq_apply_t(self%muhat, self%ct_new)
-        mom = 0
-        if (problem%dot(self%ct_z, self%ct_new) > 0) then
-          t_next = 0.5_dp*(1 + sqrt(1 + 4*t_mom**2))
-          mom = (t_mom - 1)/t_next
-          t_mom = t_next
-        else
-          t_mom = 1
-          self%n_mu_restarts = self%n_mu_restarts + 1
-        end if
-        self%muhat(1:m) = self%nu_new(1:m) + mom*(self%nu_new(1:m) - self%nu_prev(1:m))
-        self%nu_prev(1:m) = self%nu_new(1:m)
-      else if (self%mu_update == 'face') then
-        ! on the face only once the active set repeats (a face update with the
-        ! wrong active set amplifies the rows that are about to leave it)
-        if (same_active_set(self, problem, x, outer)) then
-          call face_multiplier_step(self, problem, x, self%mu_step*self%rho)
-          self%n_face_updates = self%n_face_updates + 1
-        else
-          self%muhat = self%muhat + self%rho*self%rule%z
-        end if
-      else if (self%mu_step /= 1 .or. self%mu_momentum > 0) then
-        ! heavy ball: nu_prev holds mu_{k-1}; the momentum is dropped for this
-        ! step when (C x_k)^T (mu_k - mu_{k-1}) < 0
-        mom = self%mu_momentum
-        if (mom > 0 .and. outer > 1) then
-          call problem%eq_apply_t(self%rule%z, self%ct_z)
-          self%nu_new(1:m) = self%muhat(1:m) - self%nu_prev(1:m)
-          call problem%eq_apply_t(self%nu_new, self%ct_new)
-          if (problem%dot(self%ct_z, self%ct_new) < 0) then
-            mom = 0
-            self%n_mu_restarts = self%n_mu_restarts + 1
-          end if
-        else
-          mom = 0
-        end if
-        self%nu_new(1:m) = self%muhat(1:m) + self%mu_step*self%rho*self%rule%z(1:m) + &
-                           mom*(self%muhat(1:m) - self%nu_prev(1:m))
-        self%nu_prev(1:m) = self%muhat(1:m)
-        self%muhat(1:m) = self%nu_new(1:m)
-      else
-        self%muhat = self%muhat + self%rho*self%rule%z
-      end if
+      ! 3. multiplier update; the gradient follows without a Hessian product
+      self%muhat = self%muhat + self%rho*self%rule%z
       call problem%eq_apply_t(self%muhat, self%ct_new)
-      if (self%mu_update /= 'plain' .or. self%mu_step /= 1 .or. self%mu_momentum > 0) then
-        call problem%eq_apply_t(self%rule%z, self%ct_z)
-        do i = 1, n
-          self%g_prev(i) = self%ct_new(i) - self%ct_mu(i)
-        end do
-        l_next = problem%dot(self%ct_z, self%g_prev)
-      else
-        l_next = self%rho*self%cnorm**2
-      end if
       do i = 1, n
         self%gradient(i) = self%gradient(i) + (self%ct_new(i) - self%ct_mu(i))
         self%ct_mu(i) = self%ct_new(i)
@@ -707,7 +593,7 @@ contains
       ! inner ||A|| estimate becomes max(||A||, rho) (A_0 and C^T C act on
       ! complementary subspaces), and alpha_bar follows. L(x_k, mu_{k+1}) grows
       ! by (rho - rho_old)/2 ||C x_k||^2, which the next test of 4. includes.
-      l_shift = l_next
+      l_shift = self%rho*self%cnorm**2
       ! rho_stall > 0: the first raise needs a stall (windowed test with
       ! rho_stall), the later ones the per-iteration test with rho_contraction
       q = self%rho_contraction
@@ -735,91 +621,12 @@ contains
         end if
         self%n_rho_updates = self%n_rho_updates + 1
         last_raise = outer
-        t_mom = 1   ! 'nesterov': a new dual function, no momentum across the raise
       end if
     end do
     self%n_eq_residual = self%rule%n_eq_residual
     self%n_active = problem%count_at_bound(x)
     if (self%monitor) call monitor_summary(self)
   end subroutine smalbe_solve
-
-  !> True when the components of x at their bound are those of the previous
-  !> call (outer iteration outer - 1); records the set for the next call.
-  logical function same_active_set(self, problem, x, outer) result(same)
-    class(smalbe_t), intent(inout) :: self
-    class(qp_problem_t), intent(inout) :: problem
-    real(dp), intent(in) :: x(:)
-    integer(ip), intent(in) :: outer
-    logical, allocatable :: active(:)
-    real(dp) :: hi(1), lo(1), total(1)
-    integer(ip) :: n
-    n = problem%n
-    active = x(1:n) <= problem%lower(1:n) .and. problem%lower(1:n) > no_lower_bound
-    hi = 0
-    lo = 0
-    if (allocated(self%active_prev) .and. outer > 1) then
-      if (size(self%active_prev) == n) then
-        hi(1) = real(count(active .neqv. self%active_prev), dp)
-      else
-        hi(1) = 1
-      end if
-    else
-      hi(1) = 1
-    end if
-    call problem%reduce_sums(hi, lo, total)
-    same = total(1) == 0
-    self%active_prev = active
-  end function same_active_set
-
-  !> The face-preconditioned multiplier update ('face'): muhat <- muhat + delta
-  !> with delta an approximate solution of (C R_F C^T) delta = scale C x in mu
-  !> form, R_F the components of x off their bound: in hat form K delta =
-  !> scale z, K v = eq_residual_of(R_F eq_apply_t(v)), which is self-adjoint
-  !> and positive semidefinite in <u, v> = (C^T u)^T (C^T v), so CG in that
-  !> inner product needs only eq_apply_t, eq_residual_of and dot products of
-  !> primal-length vectors. With no bound active K = I (C C^T = I) and delta =
-  !> scale z, the plain update; with bounds active the small singular values of
-  !> C R_F (equality rows that live mostly on active components) are
-  !> compensated. At most mu_face_iterations steps, stopped at a residual
-  !> ||C^T r|| <= mu_face_tol ||C^T r_0||.
-  subroutine face_multiplier_step(self, problem, x, scale)
-    class(smalbe_t), intent(inout) :: self
-    class(qp_problem_t), intent(inout) :: problem
-    real(dp), intent(in) :: x(:)
-    real(dp), intent(in) :: scale
-    real(dp), allocatable :: r(:), p(:), kp(:), ct_r(:), ct_p(:), w(:)
-    real(dp) :: rr, rr0, rr_new, pkp, alpha, beta
-    integer(ip) :: n, m, it
-    logical, allocatable :: active(:)
-    n = problem%n
-    m = problem%eq_size()
-    allocate (r(m), p(m), kp(m), ct_r(n), ct_p(n), w(n), active(n))
-    active = x(1:n) <= problem%lower(1:n) .and. problem%lower(1:n) > no_lower_bound
-    r = scale*self%rule%z(1:m)
-    call problem%eq_apply_t(r, ct_r)
-    rr = problem%dot(ct_r, ct_r)
-    rr0 = rr
-    if (.not. (rr > 0)) return
-    p = r
-    ct_p = ct_r
-    do it = 1, self%mu_face_iterations
-      w = merge(0.0_dp, ct_p, active)
-      pkp = problem%dot(w, ct_p)
-      if (.not. (pkp > 0)) exit
-      call problem%eq_residual_of(w, kp)
-      self%n_face_cg = self%n_face_cg + 1
-      alpha = rr/pkp
-      self%muhat(1:m) = self%muhat(1:m) + alpha*p
-      r = r - alpha*kp
-      call problem%eq_apply_t(r, ct_r)
-      rr_new = problem%dot(ct_r, ct_r)
-      if (rr_new <= self%mu_face_tol**2*rr0) exit
-      beta = rr_new/rr
-      rr = rr_new
-      p = r + beta*p
-      ct_p = ct_r + beta*ct_p
-    end do
-  end subroutine face_multiplier_step
 
   !> 'tol not met: ||g^P|| = .. (must be <= ..), ||C x|| = .. (must be <= ..)'.
   function distance_to_tol(self) result(text)
@@ -887,9 +694,6 @@ contains
     self%n_m_updates = 0
     self%n_no_step = 0
     self%n_rho_updates = 0
-    self%n_mu_restarts = 0
-    self%n_face_cg = 0
-    self%n_face_updates = 0
     self%n_norm_updates = 0
     self%n_active = 0
     self%n_preconditioner = 0
@@ -942,12 +746,6 @@ contains
     write (buf, '(a,es10.3,a,es10.3,a,i0,a)') '  rho ', self%rho_initial, ' -> ', self%rho, ' (raised ', &
       self%n_rho_updates, ' times)'
     call log_message(buf)
-    if (self%mu_update /= 'plain' .or. self%mu_step /= 1 .or. self%mu_momentum > 0) then
-      write (buf, '(3a,es10.3,a,es10.3,a,i0,a,i0,a,i0)') '  multiplier update ', trim(self%mu_update), ', step ', &
-        self%mu_step, ', momentum ', self%mu_momentum, ', restarts ', self%n_mu_restarts, ', face CG steps ', &
-        self%n_face_cg, ', face updates ', self%n_face_updates
-      call log_message(buf)
-    end if
     if (self%inner%ritz%n_runs > 0) then
       write (buf, '(a,l1,a,i0,a,es10.3,a,es10.3,a,es10.3,a,i0,a,i0)') '  preconditioned ', self%preconditioned, &
         ' (applications ', self%n_preconditioner, '), face condition estimate ', self%inner%ritz%max_ratio, &
