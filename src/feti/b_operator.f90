@@ -65,15 +65,16 @@ contains
 
   !> Build B, c and G^T = B R of the local subdomains `subs` (which hold
   !> their geometry and R). Collective over `comm`.
-  subroutine init(this, p, dec, subs, comm)
+  subroutine init(this, p, dec, subs, comm, sub_dec)
     class(b_operator_t), intent(inout) :: this
     type(params_t), intent(in) :: p
     type(decomposition_t), intent(in) :: dec
+    type(decomposition_t), intent(in), optional :: sub_dec   !< hybrid TFETI: the subdomains (constraints)
     type(subdomain_t), intent(in) :: subs(:)
     type(MPI_Comm), intent(in) :: comm
     integer(ip) :: ls
     call this%free()
-    call build_constraints(p, dec, subs, comm, this%con)
+    call build_constraints(p, dec, subs, comm, this%con, sub_dec)
     this%nlocal = size(subs, kind=ip)
     allocate (this%offset(this%nlocal + 1))
     this%offset(1) = 0

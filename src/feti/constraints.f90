@@ -36,6 +36,17 @@
 !> unweighted ones bit for bit.
 !> Top Dirichlet takes precedence over symmetry on shared edges.
 !>
+!> Hybrid TFETI (`&mesh cluster`, src/mesh/clusters.f90): the local units
+!> `subs` are clusters and `dec` is the cluster-level decomposition;
+!> `sub_dec` (the subdomains) gives a node's copies. The copies of a corner
+!> node inside one cluster are one dof (merged by partial assembly), so the
+!> rows above are built over the node's copies after merging (clusters::
+!> node_copies: one representative per cluster, weight w = the number of
+!> merged subdomains, w = 1 for every other copy), with the same formulas;
+!> B diag(1/w) B^T = I per node holds with these weights. Rows are owned by
+!> the rank of the first copy's cluster. Without clusters the merged list
+!> is the plain one and the rows are today's bit for bit.
+!>
 !> Every row has a canonical 64-bit key (node, component, kind, index) that
 !> does not depend on the number of ranks, and one owner: the rank of the
 !> subdomain the row is attached to (s_1 for gluing and contact rows). Owned
@@ -52,6 +63,7 @@ module constraints
   use dual_exchange, only: dual_exchange_t
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Allreduce, MPI_Exscan, MPI_SUM
   use materials, only: subdomain_material
+  use clusters, only: node_copies
   implicit none
   private
 
@@ -97,6 +109,7 @@ module constraints
     integer(i8) :: key
     integer :: owner
     integer(ip) :: sub, dof, node, gid, kind, slot
+    integer(ip) :: cslot   !< position of the unit in the node's unit list (the G^T block, coarse_problem)
     real(dp) :: val, c, scale, unit
   end type record_t
 
@@ -110,9 +123,10 @@ contains
 
   !> Build B, c, the entries of G^T = B R and the exchange pattern for the
   !> local subdomains `subs` (geometry and R^s are needed). Collective over `comm`.
-  subroutine build_constraints(p, dec, subs, comm, con)
+  subroutine build_constraints(p, dec, subs, comm, con, sub_dec)
     type(params_t), intent(in) :: p
     type(decomposition_t), intent(in) :: dec
+    type(decomposition_t), intent(in), optional :: sub_dec   !< hybrid TFETI: the subdomains
     type(subdomain_t), intent(in) :: subs(:)
     type(MPI_Comm), intent(in) :: comm
     type(constraints_t), intent(out) :: con
@@ -125,6 +139,7 @@ contains
     integer(ip), allocatable :: urow_first(:)   ! first record (in sorted order) of each unique row
     integer(ip) :: n_ghost, counts(4), totals(4)
     logical :: filling
+    integer(ip) :: cslot   ! visit -> emit: the unit's position in the node's unit list
 
     con%comm = comm
     call MPI_Comm_rank(comm, rank, ierr)
@@ -229,7 +244,7 @@ contains
         bs%row(bs%nentries) = local_index(row_of_rec(i))
         bs%dof(bs%nentries) = rec(i)%dof
         bs%val(bs%nentries) = rec(i)%val
-        bs%slot(bs%nentries) = rec(i)%slot
+        bs%slot(bs%nentries) = rec(i)%cslot
         bs%g(:, bs%nentries) = rec(i)%val*subs(rec(i)%sub)%R(rec(i)%dof, :)   ! G^T = B R
       end associate
     end do
@@ -247,7 +262,7 @@ contains
     con%n_gluing_global = totals(4)
 
     ! 6. Exchange pattern.
-    call build_exchange(dec, con, ghost_owner(ghost_perm), me)
+    call build_exchange(dec, con, ghost_owner(ghost_perm), me, sub_dec)
 
   contains
 
@@ -255,7 +270,7 @@ contains
     !> (count them when `fill` is false).
     subroutine visit(fill)
       logical, intent(in) :: fill
-      integer(ip) :: copies(8)
+      integer(ip) :: copies(8), reps(8), merged(8), member(8), units(8), nunits
       integer(ip) :: ls, a, gid, comp, m, j, k, ijk(3), s_id
       integer :: owner
       logical :: dirichlet(3), contact
@@ -268,11 +283,26 @@ contains
           ijk = dec%mesh%node_ijk(gid)
           x = subs(ls)%coords(:, a)
           call node_conditions(p, dec, ijk, x, dirichlet, value, contact, gap)
-          call dec%node_subdomain_list(gid, copies, m)
-          if (m == 1 .and. .not. (any(dirichlet) .or. contact)) cycle
-          j = findloc(copies(1:m), s_id, 1)
-          owner = dec%subdomain_rank(copies(1))
-          call copy_weights(copies(1:m), w(1:m))
+          if (present(sub_dec)) then
+            call node_copies(sub_dec, dec, gid, reps, copies, merged, member, m)
+            if (m == 1 .and. .not. (any(dirichlet) .or. contact)) cycle
+            if (subs(ls)%node_copy(a) == 0) then
+              j = findloc(copies(1:m), s_id, 1)
+            else
+              j = findloc(reps(1:m), subs(ls)%node_copy(a), 1)
+            end if
+            owner = dec%subdomain_rank(copies(1))
+            w(1:m) = real(merged(1:m), dp)     ! uniform material (checked): w = merged subdomains
+            call dec%node_subdomain_list(gid, units, nunits)
+            cslot = findloc(units(1:nunits), s_id, 1)
+          else
+            call dec%node_subdomain_list(gid, copies, m)
+            if (m == 1 .and. .not. (any(dirichlet) .or. contact)) cycle
+            j = findloc(copies(1:m), s_id, 1)
+            owner = dec%subdomain_rank(copies(1))
+            call copy_weights(copies(1:m), w(1:m))
+            cslot = j
+          end if
           do comp = 1, 3
             if (dirichlet(comp)) then
               call emit(row_key(gid, comp, row_dirichlet, j), int(me), ls, 3*(a - 1) + comp, a, gid, &
@@ -333,7 +363,7 @@ contains
       integer(ip), intent(in) :: ls, dof, node, gid, kind, slot
       real(dp), intent(in) :: val, c, scale, unit
       nrec = nrec + 1
-      if (filling) rec(nrec) = record_t(key, owner, ls, dof, node, gid, kind, slot, val, c, scale, unit)
+      if (filling) rec(nrec) = record_t(key, owner, ls, dof, node, gid, kind, slot, cslot, val, c, scale, unit)
     end subroutine emit
   end subroutine build_constraints
 
@@ -378,12 +408,13 @@ contains
   !> The neighbour exchange: ghosts are received from their owners in the
   !> order of `ghost_owner`; owned gluing and contact rows are sent to every
   !> other rank holding one of their copies, in key order.
-  subroutine build_exchange(dec, con, ghost_owner, me)
+  subroutine build_exchange(dec, con, ghost_owner, me, sub_dec)
     type(decomposition_t), intent(in) :: dec
+    type(decomposition_t), intent(in), optional :: sub_dec
     type(constraints_t), intent(inout) :: con
     integer(ip), intent(in) :: ghost_owner(:)   ! owner of ghost i (local row n_own+i)
     integer(ip), intent(in) :: me
-    integer(ip) :: copies(8), ncopies
+    integer(ip) :: copies(8), ncopies, reps(8), merged(8), member(8)
     integer(ip), allocatable :: dest_rank(:), dest_row(:), perm(:), send_index(:), recv_index(:)
     integer(ip), allocatable :: nbrs(:)
     integer, allocatable :: send_counts(:), recv_counts(:), ranks_here(:)
@@ -396,7 +427,11 @@ contains
     n = 0
     do i = 1, con%n_own
       if (con%kind(i) == row_dirichlet) cycle
-      call dec%node_subdomain_list(con%node(i), copies, ncopies)
+      if (present(sub_dec)) then
+        call node_copies(sub_dec, dec, con%node(i), reps, copies, merged, member, ncopies)   ! copies: clusters
+      else
+        call dec%node_subdomain_list(con%node(i), copies, ncopies)
+      end if
       if (con%kind(i) == row_gluing) then
         index = int(mod(con%key(i), 8_i8), ip) + 1   ! Helmert row k touches copies 1..k+1
         ranks_here = [(dec%subdomain_rank(copies(k)), k = 1, index + 1)]

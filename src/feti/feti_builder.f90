@@ -9,6 +9,7 @@ submodule(feti_operators) feti_builder
   use kinds, only: MPI_INT_I8, MPI_REAL_DP
   use decomposition, only: build_decomposition
   use subdomain, only: build_subdomain
+  use clusters, only: is_hybrid, unit_params, build_cluster
   use assembly, only: assemble_subdomain
   use coarse_problem, only: choose_coarse_ranks
   use mpi_f08, only: MPI_Comm_size, MPI_IN_PLACE, MPI_INTEGER, MPI_MIN
@@ -31,12 +32,31 @@ contains
     call check_coarse_ranks()
 
     call timer_start('mesh')
-    call build_decomposition(p, comm, this%dec)
+    this%hybrid = is_hybrid(p)
+    if (this%hybrid) then
+      ! hybrid TFETI: the units are the clusters (src/mesh/clusters.f90)
+      call build_decomposition(p, comm, this%sub_dec)
+      call build_decomposition(unit_params(p), comm, this%dec)
+    else
+      call build_decomposition(p, comm, this%dec)
+    end if
     this%n_local_subs = size(this%dec%local_subdomains, kind=ip)
     allocate (this%subs(this%n_local_subs))
     do ls = 1, this%n_local_subs
-      call build_subdomain(this%dec, this%dec%local_subdomains(ls), this%subs(ls))
+      if (this%hybrid) then
+        call build_cluster(this%sub_dec, this%dec, this%dec%local_subdomains(ls), this%subs(ls))
+      else
+        call build_subdomain(this%dec, this%dec%local_subdomains(ls), this%subs(ls))
+      end if
     end do
+    if (this%hybrid) then
+      block
+        character(len=200) :: line
+        write (line, '(a,i0,a,i0,a,3(1x,i0),a)') 'hybrid TFETI: ', this%sub_dec%nsubdomains, ' subdomains in ', &
+          this%dec%nsubdomains, ' clusters of', p%mesh%cluster, ' (corners assembled inside a cluster)'
+        call log_message(line)
+      end block
+    end if
     call timer_stop('mesh')
     call memory_mark('mesh')
 
@@ -49,8 +69,9 @@ contains
 
     mydofs = sum(this%subs(:)%ndof)
     call timer_start('factorization')
+    ! hybrid TFETI keeps the per-unit K^+ (sharing between clusters is not measured yet)
     call this%f%init(this%subs, p%solver%local_solver, p%solver%regularization, p%solver%local_ordering, &
-                     int(mydofs, ip), share=p%solver%share_subdomains)
+                     int(mydofs, ip), share=merge('none', p%solver%share_subdomains(1:4), this%hybrid))
     block
       character(len=160) :: line
       write (line, '(a,i0,a,i0,a)') 'local subdomains: ', this%n_local_subs, ' in ', this%f%n_classes(), &
@@ -68,7 +89,11 @@ contains
     call memory_mark('factorization')
 
     call timer_start('B and G')
-    call this%b%init(p, this%dec, this%subs, comm)
+    if (this%hybrid) then
+      call this%b%init(p, this%dec, this%subs, comm, this%sub_dec)
+    else
+      call this%b%init(p, this%dec, this%subs, comm)
+    end if
     call MPI_Allreduce(mydofs, this%n_primal_dofs, 1, MPI_INT_I8, MPI_SUM, comm, ierr)
     allocate (this%xall(this%b%n_concat()))
     call timer_stop('B and G')
@@ -134,7 +159,7 @@ contains
       character(len=300) :: msg
       call MPI_Comm_size(comm, nranks, ierr)
       call choose_coarse_ranks(p%solver%coarse_ranks, p%solver%coarse_placement, nranks, &
-                               int(product(int(p%mesh%nsub, i8)), ip), c, msg)
+                               int(product(int(p%mesh%nsub/p%mesh%cluster, i8)), ip), c, msg)
       if (len_trim(msg) > 0) call collective_error(msg, comm, exit_input_error)
     end subroutine check_coarse_ranks
   end subroutine setup
@@ -165,6 +190,10 @@ contains
     logical :: use_explicit
     real(dp) :: ratio, fl(3)
     character(len=240) :: line
+    if (this%hybrid .and. p%solver%f_action == 'auto') then
+      call log_message('F action: implicit (K^+ solves; hybrid TFETI)')
+      return
+    end if
     sharing = merge(1, 0, this%f%is_shared())
     call MPI_Allreduce(MPI_IN_PLACE, sharing, 1, MPI_INTEGER, MPI_MIN, this%communicator, ierr)
     select case (p%solver%f_action)

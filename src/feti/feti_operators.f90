@@ -41,7 +41,9 @@ module feti_operators
   type, public :: feti_t
     private
     type(MPI_Comm) :: communicator
-    type(decomposition_t) :: dec
+    type(decomposition_t) :: dec                 !< the FETI units: subdomains, or clusters (hybrid)
+    type(decomposition_t) :: sub_dec             !< hybrid TFETI (&mesh cluster): the subdomains
+    logical :: hybrid = .false.
     type(subdomain_t), allocatable :: subs(:)
     type(b_operator_t) :: b                      !< B, B^T, G, G^T
     type(f_operator_t) :: f                      !< F = B K^+ B^T
@@ -314,6 +316,7 @@ contains
     integer(ip) :: rows(4)
     rows = this%b%row_counts()
     sizes%nsubdomains = this%dec%nsubdomains
+    if (this%hybrid) sizes%nsubdomains = this%sub_dec%nsubdomains
     sizes%coarse_dim = 6*this%dec%nsubdomains
     sizes%primal_dofs = this%n_primal_dofs
     sizes%dual_dofs = rows(1)

@@ -26,6 +26,8 @@ module params
     integer(ip) :: distortion_seed = 1        !< seed of the node offsets
     character(len=name_len) :: decomposition = 'box'  !< 'box' | 'metis'
     character(len=name_len) :: mapping = 'block'      !< subdomains to ranks: 'block' | 'metis'
+    !> hybrid TFETI: subdomains per cluster per direction (1,1,1: plain TFETI)
+    integer(ip) :: cluster(3) = [1, 1, 1]
   end type mesh_params_t
 
   type, public :: material_params_t
@@ -476,7 +478,7 @@ contains
     character(len=*), intent(in), optional :: group_text
     character(len=*), intent(out), optional :: written(:)
     logical :: reading
-    integer(ip) :: nsub(3), nel(3), distortion_seed, seed, max_outer, max_hessian, power_iterations, coarse_ranks, &
+    integer(ip) :: nsub(3), nel(3), cluster(3), distortion_seed, seed, max_outer, max_hessian, power_iterations, coarse_ranks, &
                    rho_window
     real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, rho_growth, &
@@ -487,7 +489,7 @@ contains
                                m_no_step, f_action, f_storage, share_subdomains, preconditioner
     character(len=path_len) :: directory
     logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report, coarse_ooc
-    namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping
+    namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping, cluster
     namelist /material/ young, poisson, variation, contrast, seed
     namelist /load/ top_pressure
     namelist /boundary/ top_dirichlet, top_displacement, symmetry_x0, symmetry_y0
@@ -509,7 +511,7 @@ contains
     case ('mesh')
       nsub = p%mesh%nsub; nel = p%mesh%nel; lengths = p%mesh%lengths
       distortion = p%mesh%distortion; distortion_seed = p%mesh%distortion_seed
-      decomposition = p%mesh%decomposition; mapping = p%mesh%mapping
+      decomposition = p%mesh%decomposition; mapping = p%mesh%mapping; cluster = p%mesh%cluster
       if (reading) read (group_text, nml=mesh, iostat=status, iomsg=msg)
       if (.not. reading) write (written, nml=mesh, delim='quote', iostat=status, iomsg=msg)
     case ('material')
@@ -562,7 +564,7 @@ contains
     select case (name)
     case ('mesh')
       p%mesh = mesh_params_t(nsub, nel, lengths, distortion, distortion_seed, &
-                             lower(decomposition), lower(mapping))
+                             lower(decomposition), lower(mapping), cluster)
     case ('material')
       p%material = material_params_t(young, poisson, lower(variation), contrast, seed)
     case ('load')
@@ -607,6 +609,24 @@ contains
         call fail('mesh', 'decomposition', "must be 'box' or 'metis'", m%decomposition)
       if (.not. one_of(m%mapping, [character(len=8) :: 'block', 'metis'])) &
         call fail('mesh', 'mapping', "must be 'block' or 'metis'", m%mapping)
+      if (any(m%cluster < 1)) call fail('mesh', 'cluster', 'each entry must be >= 1', ints(m%cluster))
+      if (status == 0) then     ! (no short-circuit in Fortran: mod only with cluster >= 1)
+        if (any(mod(m%nsub, m%cluster) /= 0)) &
+          call fail('mesh', 'cluster', 'must divide nsub in every direction (nsub = '//ints(m%nsub)//')', &
+                    ints(m%cluster))
+      end if
+      if (any(m%cluster > 1)) then
+        if (m%decomposition /= 'box') call fail('mesh', 'cluster', &
+          "> 1 (hybrid TFETI) needs decomposition = 'box'", ints(m%cluster))
+        if (p%material%variation /= 'none') call fail('mesh', 'cluster', &
+          "> 1 (hybrid TFETI) needs &material variation = 'none'", ints(m%cluster))
+        if (p%solver%preconditioner == 'dirichlet') call fail('mesh', 'cluster', &
+          "> 1 (hybrid TFETI) works with &solver preconditioner = 'none' or 'lumped', not 'dirichlet'", &
+          ints(m%cluster))
+        if (p%solver%f_action == 'explicit') call fail('mesh', 'cluster', &
+          "> 1 (hybrid TFETI) works with &solver f_action = 'implicit' or 'auto' (which then stays implicit)", &
+          ints(m%cluster))
+      end if
       if (status == 0 .and. product(int(m%nsub, 8)) * product(int(m%nel, 8)) > 2**27) &
         call fail('mesh', 'nsub, nel', 'give at most 2**27 elements in all', &
                   ints(m%nsub)//' x '//ints(m%nel))

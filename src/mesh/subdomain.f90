@@ -19,6 +19,10 @@ module subdomain
     integer(ip) :: id = 0
     integer(ip) :: nnodes = 0, nelem = 0, ndof = 0      !< ndof = 3*nnodes
     integer(ip), allocatable :: node_gid(:)             !< ascending; local node a <-> node_gid(a)
+    !> hybrid TFETI only (a cluster of subdomains, src/mesh/clusters.f90): the
+    !> subdomain whose copy local node a is, 0 for a corner merged over the
+    !> cluster; node_gid is then ascending but not unique. Unallocated otherwise.
+    integer(ip), allocatable :: node_copy(:)
     real(dp), allocatable :: coords(:, :)               !< (3, nnodes)
     integer(ip), allocatable :: elem_gid(:)             !< (nelem), ascending
     integer(ip), allocatable :: elem_nodes(:, :)        !< (8, nelem) local node numbers, Q1 order

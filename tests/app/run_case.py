@@ -4,6 +4,7 @@
     run_case.py --program feticontact --mpiexec mpiexec --ranks 2 --input inputs/block.nml \
         --workdir DIR [--set group:variable=value ...] [--expect-exit N] [--expect-message REGEX] \
         [--check block_exact:TOL] [--check report] [--check xdmf] [--check same_as:DIR:TOL]
+        [--check alpha_agree:TOL]
 
 The input file is copied with the --set overrides merged into its groups and
 with &output directory pointing into DIR. Every check derives its expected
@@ -121,7 +122,8 @@ def check_report(outdir, ranks):
             check(s in r.get(key, {}), "report has '%s.%s'" % (key, s))
     s, sol = r["sizes"], r["solver"]
     check(s["ranks"] == ranks, "sizes.ranks == %d" % ranks)
-    check(s["coarse_dim"] == 6 * s["subdomains"], "coarse_dim = 6 * subdomains")
+    per_unit = int(np.prod(r["case"]["mesh"].get("cluster", [1, 1, 1])))   # hybrid TFETI: 6 rows per cluster
+    check(s["coarse_dim"] * per_unit == 6 * s["subdomains"], "coarse_dim = 6 * subdomains / cluster size")
     check(s["active_contact"] <= s["contact_rows"], "active_contact <= contact_rows")
     check(s["dual_dofs"] >= s["contact_rows"], "dual_dofs >= contact_rows")
     check(sol["converged"] is True, "solver converged")
@@ -181,6 +183,13 @@ def check_same_as(outdir, other, tol):
     check(diff <= tol * scale, "same displacements as %s: max diff / max |u| = %.3e <= %.1e" % (other, diff / scale, tol))
 
 
+def check_alpha_agree(outdir, tol):
+    """&reconstruction method = 'both': the new (Eq. 24) and the standard (Eq. 10) alpha agree."""
+    with open(os.path.join(outdir, "report.json")) as f:
+        d = json.load(f)["reconstruction"]["alpha_difference"]
+    check(d is not None and d <= tol, "||alpha_new - alpha_standard|| / ||alpha_standard|| = %s <= %.1e" % (d, tol))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--program", required=True)
@@ -218,6 +227,8 @@ def main():
             check_report(outdir, args.ranks)
         elif kind == "xdmf":
             check_xdmf(outdir)
+        elif kind == "alpha_agree":
+            check_alpha_agree(outdir, float(rest[0]))
         elif kind == "same_as":
             check_same_as(outdir, os.path.join(rest[0], "out"), float(rest[1]))
         else:
