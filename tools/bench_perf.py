@@ -19,7 +19,11 @@ the machine it reaches, with the machine's figures measured in the same run:
 - factorization and explicit F (the build of the explicit local operators):
   floating-point operations (MUMPS's count RINFOG(3); + n_d^3 per subdomain
   for the dense inverses) per second, against dgemm (numpy, one BLAS thread
-  per process, as many processes as ranks at once).
+  per process, as many processes as ranks at once);
+- F action with the shared explicit operators (`&solver share_subdomains`,
+  one dgemm per class of congruent subdomains): also its flops
+  (performance.f_flops_per_action_sum, 2 n_c^2 per member) per second against
+  the same dgemm figure.
 
 Example (F action implicit against explicit, three sizes of subdomain):
 
@@ -106,7 +110,8 @@ def report_variant(name, reports, bw, gf, ranks):
     perf = [r["performance"] for r in reports]
     sol = reports[0]["solver"]
     calls = sol["f_applications"]
-    print("### %s (F action %s)" % (name, perf[0].get("f_action", "implicit")))
+    print("### %s (F action %s%s)" % (name, perf[0].get("f_action", "implicit"),
+                                      ", shared per class" if perf[0].get("f_shared") else ""))
     print()
     print("| phase | median [s] | min [s] | max [s] | work | rate | fraction of the machine |")
     print("|---|---:|---:|---:|---:|---:|---:|")
@@ -119,6 +124,12 @@ def report_variant(name, reports, bw, gf, ranks):
             gbs = med([p["f_bandwidth_bytes_per_second"] / 1e9 for p in perf])
             rate = "%.2f GB/s" % gbs
             frac = "%.2f of triad" % (gbs / bw)
+            ffl = perf[0].get("f_flops_per_action_sum", 0)
+            if ffl:   # shared explicit operators: one dgemm per class, compute bound
+                gfs = ffl / 1e9 / med([p["f_action_seconds_per_call"] for p in perf])
+                work += ", %.3f Gflop per call" % (ffl / 1e9)
+                rate += ", %.2f GF/s" % gfs
+                frac += ", %.2f of dgemm" % (gfs / gf)
         elif ph in ("factorization", "explicit F"):
             key = "factorization_flops_sum" if ph == "factorization" else "explicit_f_flops_sum"
             fl = perf[0].get(key, 0)

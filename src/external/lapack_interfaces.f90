@@ -5,7 +5,7 @@ module lapack_interfaces
   use kinds, only: dp
   implicit none
   private
-  public :: dpotrf, dpotri, dsyev, dsymv, dspmv, dgemv, dtrsm, dtrsv
+  public :: dpotrf, dpotri, dsyev, dsymv, dspmv, dgemv, dgemm, dtrsm, dtrsv
 
   interface
     !> Cholesky factor of a symmetric positive definite matrix.
@@ -57,6 +57,14 @@ module lapack_interfaces
       real(dp), intent(in) :: alpha, beta, a(lda, *), x(*)
       real(dp), intent(inout) :: y(*)
     end subroutine dgemv
+    !> C <- alpha op(A) op(B) + beta C.
+    subroutine dgemm(transa, transb, m, n, k, alpha, a, lda, b, ldb, beta, c, ldc)
+      import :: dp
+      character(len=1), intent(in) :: transa, transb
+      integer, intent(in) :: m, n, k, lda, ldb, ldc
+      real(dp), intent(in) :: alpha, beta, a(lda, *), b(ldb, *)
+      real(dp), intent(inout) :: c(ldc, *)
+    end subroutine dgemm
     !> B <- alpha op(A)^{-1} B (or B op(A)^{-1}), A triangular.
     subroutine dtrsm(side, uplo, transa, diag, m, n, alpha, a, lda, b, ldb)
       import :: dp

@@ -12,7 +12,11 @@
 !>   touches (schur_complement: one K_ii solve of all the rank's subdomains
 !>   and two products with K per application).
 !> Applied like F: dual vector -> B^T (neighbour exchange) -> local ->
-!> B (exchange back).
+!> B (exchange back). 'lumped' with classes of congruent subdomains
+!> (`&solver share_subdomains`, K_s = c_s K_r): A_s restricted to the dofs B
+!> touches is c_s K_r(U_c, U_c), applied to all the members of a class at
+!> once (class_operator, K_r on the union U_c of the class's touched dofs in
+!> CSR, read once per application for all members).
 !>
 !> Contact rows (constraints: spread over all copies of their node with the
 !> gluing weights, entries v_c = -w_c/sqrt(S), S = sum_c w_c) are orthogonal
@@ -41,6 +45,9 @@ module dual_preconditioner
   use b_operator, only: b_operator_t
   use constraints, only: constraints_t, row_contact
   use schur_complement, only: schur_complement_t
+  use subdomain_classes, only: subdomain_classes_t
+  use class_operator, only: class_operator_t
+  use csr_matrix, only: csr_t
   implicit none
   private
 
@@ -52,6 +59,8 @@ module dual_preconditioner
     real(dp), allocatable :: inv_w(:)           !< (nlocal) 1/w_s
     real(dp), allocatable :: xall(:), yall(:)   !< work: concatenated primal vectors
     type(schur_complement_t) :: schur
+    logical :: shared = .false.                 !< 'lumped' applied per class (class_operator)
+    type(class_operator_t) :: shared_op
     integer(i8) :: applications = 0
     !> D of the module: d_r per owned row (sqrt(n_r) on contact rows, 1 elsewhere)
     real(dp), allocatable :: d(:), dx(:)
@@ -69,12 +78,15 @@ contains
 
   !> `kind`: 'lumped' or 'dirichlet'; `b` and `subs` (K assembled) must
   !> outlive the preconditioner; `weights(ls)` = w_s of local subdomain ls.
-  subroutine init(this, kind, b, subs, weights)
+  !> `classes` (optional): classes of congruent subdomains of `subs`; with
+  !> 'lumped' and some class of two members or more, A_s is applied per class.
+  subroutine init(this, kind, b, subs, weights, classes)
     class(dual_preconditioner_t), intent(inout) :: this
     character(len=*), intent(in) :: kind
     type(b_operator_t), intent(inout), target :: b
     type(subdomain_t), intent(in), target :: subs(:)
     real(dp), intent(in) :: weights(:)
+    type(subdomain_classes_t), intent(in), optional :: classes
     type(constraints_t), pointer :: con
     logical, allocatable :: on_interface(:)
     integer(ip) :: ls, e, r(2)
@@ -103,7 +115,59 @@ contains
       end do
       call this%schur%init(subs, on_interface)
     end if
+    if (kind == 'lumped' .and. present(classes)) then
+      if (classes%shared()) call init_shared(this, b, subs, classes)
+    end if
   end subroutine init
+
+  !> 'lumped' per class: M_c = K_r(U_c, U_c) in CSR, a_s = c_s / w_s^2.
+  subroutine init_shared(this, b, subs, classes)
+    class(dual_preconditioner_t), intent(inout) :: this
+    type(b_operator_t), intent(in) :: b
+    type(subdomain_t), intent(in) :: subs(:)
+    type(subdomain_classes_t), intent(in) :: classes
+    integer(ip), allocatable :: dofs(:), cmap(:)
+    type(csr_t) :: m
+    integer(ip) :: c, r, i, k, n, j, nz
+    call this%shared_op%init(b, classes, classes%scale*this%inv_w**2)
+    do c = 1, classes%nclass
+      r = classes%rep(c)
+      call this%shared_op%class_dofs(b, c, dofs)
+      n = size(dofs, kind=ip)
+      allocate (cmap(subs(r)%ndof))
+      cmap = 0
+      do i = 1, n
+        cmap(dofs(i)) = i
+      end do
+      ! K_r(U_c, U_c): the rows of U_c, the columns in U_c renumbered (ascending stays ascending)
+      m%nrows = n
+      m%ncols = n
+      allocate (m%rowptr(n + 1))
+      m%rowptr(1) = 1
+      do i = 1, n
+        nz = 0
+        do k = subs(r)%K%rowptr(dofs(i)), subs(r)%K%rowptr(dofs(i) + 1) - 1
+          if (cmap(subs(r)%K%colind(k)) > 0) nz = nz + 1
+        end do
+        m%rowptr(i + 1) = m%rowptr(i) + nz
+      end do
+      allocate (m%colind(m%rowptr(n + 1) - 1), m%values(m%rowptr(n + 1) - 1))
+      do i = 1, n
+        nz = m%rowptr(i)
+        do k = subs(r)%K%rowptr(dofs(i)), subs(r)%K%rowptr(dofs(i) + 1) - 1
+          j = cmap(subs(r)%K%colind(k))
+          if (j == 0) cycle
+          m%colind(nz) = j
+          m%values(nz) = subs(r)%K%values(k)
+          nz = nz + 1
+        end do
+      end do
+      call this%shared_op%set_sparse(c, m)
+      call m%free()
+      deallocate (cmap)
+    end do
+    this%shared = .true.
+  end subroutine init_shared
 
   !> y = M^{-1} x (dual vectors, owned rows). Collective.
   subroutine apply(this, x, y)
@@ -114,6 +178,13 @@ contains
     if (.not. associated(this%b)) call fatal_error('dual_preconditioner: apply before init')
     call timer_start('preconditioner')
     this%dx = this%d*x(1:size(this%d))
+    if (this%shared) then
+      call this%shared_op%apply(this%b, this%dx, y)
+      y(1:size(this%d)) = this%d*y(1:size(this%d))
+      this%applications = this%applications + 1
+      call timer_stop('preconditioner')
+      return
+    end if
     this%xall = 0
     call this%b%add_transpose(this%dx, 1.0_dp, this%xall)
     do ls = 1, size(this%subs, kind=ip)
@@ -197,6 +268,8 @@ contains
   subroutine free(this)
     class(dual_preconditioner_t), intent(inout) :: this
     call this%schur%free()
+    call this%shared_op%free()
+    this%shared = .false.
     if (allocated(this%inv_w)) deallocate (this%inv_w)
     if (allocated(this%xall)) deallocate (this%xall, this%yall)
     if (allocated(this%d)) deallocate (this%d, this%dx)

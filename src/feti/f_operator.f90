@@ -27,6 +27,9 @@ module f_operator
   use local_inverse, only: local_inverse_t
   use kplus_block, only: kplus_block_t
   use kplus_set, only: kplus_set_t
+  use kplus_shared, only: kplus_shared_t
+  use subdomain_classes, only: subdomain_classes_t, find_classes
+  use class_operator, only: class_operator_t
   use b_operator, only: b_operator_t
   use sorting, only: sort_unique
   use kplus, only: regularized_system
@@ -54,6 +57,10 @@ module f_operator
     integer(ip) :: n_local_rows = 0
     real(dp) :: build_flop_count = 0              !< flops of build_explicit (MUMPS Schur + LAPACK)
     real(dp), allocatable :: wloc(:), wloc2(:), t(:), u(:)   !< work
+    ! ---- shared local operators (`share_subdomains = 'auto'` and classes found)
+    type(subdomain_classes_t) :: classes          !< one class per subdomain without sharing
+    logical :: sharing = .false.                  !< K^+ served per class (kplus_shared_t)
+    type(class_operator_t) :: shared_op           !< S^_c per class, a_s = 1/c_s (explicit and shared)
   contains
     procedure :: init
     procedure :: build_explicit
@@ -68,6 +75,12 @@ module f_operator
     procedure :: local_operator
     procedure :: factor_flops
     procedure :: build_flops
+    procedure :: is_shared
+    procedure :: n_classes
+    procedure :: shared_explicit_flops
+    procedure :: classes_found
+    procedure :: max_class_deviation
+    procedure :: flops_per_action
     procedure :: free
   end type f_operator_t
 
@@ -77,20 +90,38 @@ contains
   !> Factorize K_reg of the local subdomains `subs` (K and R assembled) with
   !> `local_solver` 'block' or 'subdomain'; `n_concat`: length of their
   !> concatenated vector.
-  subroutine init(this, subs, local_solver, regularization, ordering, n_concat)
+  !> `share` ('auto' or 'none', default 'none'): with 'auto', classes of
+  !> congruent subdomains are looked for (subdomain_classes) and, when some
+  !> class has two members or more, K^+ is factorized once per class
+  !> (kplus_shared_t) whatever `local_solver` says.
+  subroutine init(this, subs, local_solver, regularization, ordering, n_concat, share)
     class(f_operator_t), intent(inout) :: this
     type(subdomain_t), intent(in) :: subs(:)
     character(len=*), intent(in) :: local_solver, ordering
     real(dp), intent(in) :: regularization
     integer(ip), intent(in) :: n_concat
+    character(len=*), intent(in), optional :: share
     integer(ip) :: s
+    logical :: look
     call this%free()
-    if (local_solver == 'block') then
-      allocate (kplus_block_t :: this%kinv)
+    look = .false.
+    if (present(share)) look = share == 'auto'
+    call find_classes(subs, this%classes, look)
+    this%sharing = this%classes%shared()
+    if (this%sharing) then
+      allocate (kplus_shared_t :: this%kinv)
+      select type (k => this%kinv)
+      type is (kplus_shared_t)
+        call k%init_classes(subs, this%classes, regularization, ordering)
+      end select
     else
-      allocate (kplus_set_t :: this%kinv)
+      if (local_solver == 'block') then
+        allocate (kplus_block_t :: this%kinv)
+      else
+        allocate (kplus_set_t :: this%kinv)
+      end if
+      call this%kinv%init(subs, regularization, ordering)
     end if
-    call this%kinv%init(subs, regularization, ordering)
     allocate (this%xall(n_concat))
     this%nsub = size(subs, kind=ip)
     allocate (this%doff(this%nsub + 1))
@@ -124,6 +155,10 @@ contains
     if (storage /= 'symmetric' .and. storage /= 'packed' .and. storage /= 'general') &
       call fatal_error("f_operator%build_explicit: unknown storage '"//trim(storage)//"'")
     if (size(subs, kind=ip) /= this%nsub) call fatal_error('f_operator%build_explicit: subs differ from init')
+    if (this%sharing) then
+      call build_explicit_shared(this, b, subs, regularization)
+      return
+    end if
     this%storage = storage
     this%n_local_rows = b%n_local_rows()
     this%nd = this%touched_dofs(b)
@@ -239,7 +274,9 @@ contains
     real(dp), intent(in) :: x(:)
     real(dp), intent(inout) :: y(:)
     call timer_start('F action')
-    if (this%explicit) then
+    if (this%explicit .and. this%sharing) then
+      call this%shared_op%apply(b, x, y)
+    else if (this%explicit) then
       call apply_explicit(this, b, x, y)
     else
       this%xall = 0
@@ -332,7 +369,9 @@ contains
   integer(i8) function bytes_per_action(this, b)
     class(f_operator_t), intent(in) :: this
     type(b_operator_t), intent(in) :: b
-    if (this%explicit) then
+    if (this%explicit .and. this%sharing) then
+      bytes_per_action = this%shared_op%bytes_per_action()
+    else if (this%explicit) then
       bytes_per_action = this%explicit_bytes(b, this%storage, this%nd)
     else
       bytes_per_action = this%implicit_bytes(b)
@@ -355,6 +394,10 @@ contains
     integer(ip) :: n, i, j, e1, e2, nb
     integer(i8) :: o
     if (.not. this%explicit) call fatal_error('f_operator%local_operator: the explicit operators are not built')
+    if (this%sharing) then
+      call this%shared_op%local_matrix(s, rows, fs)
+      return
+    end if
     n = this%nd(s)
     o = this%soff(s)
     allocate (sf(n, n))
@@ -402,12 +445,136 @@ contains
     end if
     if (allocated(this%xall)) deallocate (this%xall)
     if (allocated(this%doff)) deallocate (this%doff)
-    if (allocated(this%nd)) deallocate (this%nd, this%soff, this%eoff, this%erow, this%edof, this%eval)
+    if (allocated(this%nd)) deallocate (this%nd)
+    if (allocated(this%soff)) deallocate (this%soff)
     if (allocated(this%smat)) deallocate (this%smat)
     if (allocated(this%wloc)) deallocate (this%wloc, this%wloc2, this%t, this%u)
+    call this%shared_op%free()
+    if (allocated(this%eoff)) deallocate (this%eoff)
+    if (allocated(this%erow)) deallocate (this%erow, this%edof, this%eval)
+    this%classes = subdomain_classes_t()
+    this%sharing = .false.
     this%explicit = .false.
     this%build_flop_count = 0
     this%applications = 0
     this%nsub = 0
   end subroutine free
+
+  !> True when K^+ is served per class of congruent subdomains.
+  logical function is_shared(this)
+    class(f_operator_t), intent(in) :: this
+    is_shared = this%sharing
+  end function is_shared
+
+  !> Classes of congruent subdomains on this rank (the number of local
+  !> subdomains without sharing).
+  integer(ip) function n_classes(this)
+    class(f_operator_t), intent(in) :: this
+    n_classes = this%classes%nclass
+  end function n_classes
+
+  !> The classes of congruent subdomains found by init (for the
+  !> preconditioner's shared matrices).
+  function classes_found(this) result(cl)
+    class(f_operator_t), intent(in) :: this
+    type(subdomain_classes_t) :: cl
+    cl = this%classes
+  end function classes_found
+
+  !> Flops of one F action on this rank with the shared explicit operators
+  !> (2 n_c^2 m_c per class); 0 on the other paths (memory bound).
+  real(dp) function flops_per_action(this)
+    class(f_operator_t), intent(in) :: this
+    flops_per_action = 0
+    if (this%explicit .and. this%sharing) flops_per_action = this%shared_op%flops_per_action()
+  end function flops_per_action
+
+  !> max |K_s - c_s K_r| / max |K_s| over the members of the classes.
+  real(dp) function max_class_deviation(this)
+    class(f_operator_t), intent(in) :: this
+    max_class_deviation = this%classes%max_deviation
+  end function max_class_deviation
+
+  !> Flops of one shared explicit F action on this rank (2 n_c^2 m_c per
+  !> class: the product S^_c X with m_c columns) and of its build (n_c^3 per
+  !> class: the dense inverse), without building anything; 0 without sharing.
+  function shared_explicit_flops(this, b) result(fl)
+    class(f_operator_t), intent(in) :: this
+    type(b_operator_t), intent(in) :: b
+    real(dp) :: fl(2)
+    type(class_operator_t) :: tmp
+    fl = 0
+    if (.not. this%sharing) return
+    call tmp%init(b, this%classes, 1/this%classes%scale)
+    fl(1) = tmp%flops_per_action()
+    fl(2) = sum(real(tmp%cn, dp)**3)
+    call tmp%free()
+  end function shared_explicit_flops
+
+  !> Explicit local operators shared per class (class_operator): S^_c =
+  !> (K_reg^r)^{-1} of the representative r restricted to the union U_c of
+  !> the dofs B touches in the class, built as in build_explicit (MUMPS Schur
+  !> complement, LAPACK inverse); member s uses S^_c / c_s.
+  subroutine build_explicit_shared(this, b, subs, regularization)
+    type(f_operator_t), intent(inout) :: this
+    type(b_operator_t), intent(in) :: b
+    type(subdomain_t), intent(in) :: subs(:)
+    real(dp), intent(in) :: regularization
+    integer(ip), allocatable :: cmap(:), dofs(:), irn(:), jcn(:), perm(:)
+    real(dp), allocatable :: a(:), sd(:, :)
+    type(mumps_t) :: m
+    integer(ip) :: c, r, n, i, j, k
+    integer :: info
+
+    this%storage = 'general'
+    call this%shared_op%init(b, this%classes, 1/this%classes%scale)
+    do c = 1, this%classes%nclass
+      r = this%classes%rep(c)
+      call this%shared_op%class_dofs(b, c, dofs)
+      n = size(dofs, kind=ip)
+      if (n == 0) cycle
+      if (allocated(cmap)) deallocate (cmap)
+      allocate (cmap(subs(r)%ndof))
+      cmap = 0
+      do i = 1, n
+        cmap(dofs(i)) = i
+      end do
+      call regularized_system(subs(r), regularization, 'amd', irn, jcn, a, perm)
+      if (allocated(sd)) deallocate (sd)
+      allocate (sd(n, n))
+      if (n == subs(r)%ndof) then
+        sd = 0
+        do k = 1, size(a, kind=ip)
+          i = cmap(irn(k))
+          j = cmap(jcn(k))
+          sd(i, j) = sd(i, j) + a(k)
+          if (i /= j) sd(j, i) = sd(j, i) + a(k)
+        end do
+      else
+        call timer_start('explicit F: Schur')
+        call m%init(MPI_COMM_SELF, spd=.true.)
+        call m%set_centralized(subs(r)%ndof, irn, jcn, a)
+        call m%set_ordering('amd')
+        call m%set_schur(dofs)
+        call m%factorize()
+        call m%schur_complement(sd)
+        this%build_flop_count = this%build_flop_count + m%factor_flops()
+        call m%free()
+        call timer_stop('explicit F: Schur')
+      end if
+      this%build_flop_count = this%build_flop_count + real(n, dp)**3
+      call timer_start('explicit F: inverse')
+      call dpotrf('U', n, sd, n, info)
+      if (info == 0) call dpotri('U', n, sd, n, info)
+      if (info /= 0) call fatal_error('f_operator%build_explicit: the Schur complement of K_reg is not '// &
+                                      'positive definite (LAPACK dpotrf/dpotri failed)')
+      call timer_stop('explicit F: inverse')
+      do j = 1, n
+        sd(j + 1:n, j) = sd(j, j + 1:n)
+      end do
+      call this%shared_op%set_matrix(c, sd)
+    end do
+    this%explicit = .true.
+  end subroutine build_explicit_shared
+
 end module f_operator

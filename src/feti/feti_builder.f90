@@ -12,7 +12,7 @@ submodule(feti_operators) feti_builder
   use clusters, only: is_hybrid, unit_params, build_cluster
   use assembly, only: assemble_subdomain
   use coarse_problem, only: choose_coarse_ranks
-  use mpi_f08, only: MPI_Comm_size, MPI_IN_PLACE
+  use mpi_f08, only: MPI_Comm_size, MPI_IN_PLACE, MPI_INTEGER, MPI_MIN
   use errors, only: collective_error, exit_input_error
   use ritz_values, only: tridiagonal_extremes
   implicit none
@@ -69,8 +69,22 @@ contains
 
     mydofs = sum(this%subs(:)%ndof)
     call timer_start('factorization')
+    ! hybrid TFETI keeps the per-unit K^+ (sharing between clusters is not measured yet)
     call this%f%init(this%subs, p%solver%local_solver, p%solver%regularization, p%solver%local_ordering, &
-                     int(mydofs, ip))
+                     int(mydofs, ip), share=merge('none', p%solver%share_subdomains(1:4), this%hybrid))
+    block
+      character(len=160) :: line
+      write (line, '(a,i0,a,i0,a)') 'local subdomains: ', this%n_local_subs, ' in ', this%f%n_classes(), &
+        ' classes of congruent subdomains'
+      if (this%f%is_shared()) then
+        block
+          character(len=40) :: dev
+          write (dev, '(es9.2)') this%f%max_class_deviation()
+          line = trim(line)//' (K^+ shared per class; max |K_s - c_s K_r| / max |K_s| ='//trim(dev)//')'
+        end block
+      end if
+      call log_message(line)
+    end block
     call timer_stop('factorization')
     call memory_mark('factorization')
 
@@ -152,7 +166,12 @@ contains
 
   !> `&solver f_action`: build the explicit local operators for 'explicit',
   !> or for 'auto' when the cost model says they pay (the same choice on all
-  !> ranks, from global sums). The model, measured (docs/RESULTS.md, "Speed
+  !> ranks, from global sums). With K^+ shared per class on every rank
+  !> (`share_subdomains`), the explicit action is one dgemm per class
+  !> (compute bound) against the implicit one's streaming of the factors
+  !> (memory bound): explicit when its flops per action are at most
+  !> `shared_flops_per_byte` times the implicit bytes (docs/RESULTS.md
+  !> "Shared local operators (issue 16)"). Otherwise: The model, measured (docs/RESULTS.md, "Speed
   !> (issue 16)"): both F actions are memory bound, so one explicit action
   !> saves time in proportion to the bytes it saves, I - E (implicit minus
   !> explicit bytes per action); the build costs in proportion to sum n_d^3
@@ -164,22 +183,37 @@ contains
     class(feti_t), intent(inout) :: this
     type(params_t), intent(in) :: p
     real(dp), parameter :: payback_flops_per_byte = 150
+    real(dp), parameter :: shared_flops_per_byte = 8
     integer(i8) :: mine(3), all(3)
     integer(ip), allocatable :: nd(:)
-    integer :: ierr
+    integer :: ierr, sharing
     logical :: use_explicit
-    real(dp) :: ratio
+    real(dp) :: ratio, fl(3)
     character(len=240) :: line
     if (this%hybrid .and. p%solver%f_action == 'auto') then
       call log_message('F action: implicit (K^+ solves; hybrid TFETI)')
       return
     end if
+    sharing = merge(1, 0, this%f%is_shared())
+    call MPI_Allreduce(MPI_IN_PLACE, sharing, 1, MPI_INTEGER, MPI_MIN, this%communicator, ierr)
     select case (p%solver%f_action)
     case ('explicit')
       use_explicit = .true.
     case ('implicit')
       use_explicit = .false.
     case default
+     if (sharing == 1) then
+      ! shared per class on every rank: the explicit action is one dgemm per
+      ! class (compute bound), the implicit one memory bound
+      fl(1:2) = this%f%shared_explicit_flops(this%b)
+      fl(3) = real(this%f%implicit_bytes(this%b), dp)
+      call MPI_Allreduce(MPI_IN_PLACE, fl, 3, MPI_REAL_DP, MPI_SUM, this%communicator, ierr)
+      ratio = fl(1)/max(1.0_dp, fl(3))
+      use_explicit = ratio <= shared_flops_per_byte
+      write (line, '(a,es10.3,a,es10.3,a,f0.3,a)') 'F action (auto, shared): implicit ', fl(3), &
+        ' bytes, explicit ', fl(1), ' flops per action on all ranks; ', ratio, ' flop per byte'
+      call log_message(line)
+     else
       nd = this%f%touched_dofs(this%b)
       mine = [this%f%implicit_bytes(this%b), this%f%explicit_bytes(this%b, p%solver%f_storage, nd), &
               sum(int(nd, i8)**3)]
@@ -190,10 +224,15 @@ contains
         ' bytes, explicit ', real(all(2), dp), ' bytes per action on all ranks; build/saving ', ratio, &
         ' flop per byte'
       call log_message(line)
+     end if
     end select
     if (use_explicit) then
       call this%f%build_explicit(this%b, this%subs, p%solver%regularization, p%solver%f_storage)
-      call log_message('F action: explicit local operators ('//trim(p%solver%f_storage)//')')
+      if (this%f%is_shared()) then
+        call log_message('F action: explicit local operators shared per class (dgemm)')
+      else
+        call log_message('F action: explicit local operators ('//trim(p%solver%f_storage)//')')
+      end if
     else
       call log_message('F action: implicit (K^+ solves)')
     end if

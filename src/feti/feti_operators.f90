@@ -72,6 +72,7 @@ module feti_operators
     procedure :: apply_abs_b
     procedure :: local_solve
     procedure :: bytes_per_f_action
+    procedure :: flops_per_f_action
     procedure :: keyed_random
     procedure :: init_active_coarse
     procedure :: init_orthonormal
@@ -101,6 +102,8 @@ module feti_operators
     procedure :: norm_pfp
     procedure :: f_applications
     procedure :: f_explicit
+    procedure :: f_shared
+    procedure :: f_classes
     procedure :: f_local_operator
     procedure :: setup_flops
     procedure :: coarse_solves
@@ -234,6 +237,13 @@ contains
     bytes_per_f_action = this%f%bytes_per_action(this%b)
   end function bytes_per_f_action
 
+  !> Flops of one F action on this rank when it is one dgemm per class
+  !> (shared explicit operators); 0 otherwise.
+  real(dp) function flops_per_f_action(this)
+    class(feti_t), intent(in) :: this
+    flops_per_f_action = this%f%flops_per_action()
+  end function flops_per_f_action
+
   !> A dual vector with entries in [-1, 1] that depend only on the rows'
   !> canonical keys (the same on any number of ranks).
   subroutine keyed_random(this, seed, x)
@@ -268,7 +278,11 @@ contains
     type(dual_preconditioner_t), intent(inout) :: prec
     character(len=*), intent(in) :: kind
     real(dp), intent(in) :: weights(:)
-    call prec%init(kind, this%b, this%subs, weights)
+    if (this%f%is_shared()) then
+      call prec%init(kind, this%b, this%subs, weights, this%f%classes_found())
+    else
+      call prec%init(kind, this%b, this%subs, weights)
+    end if
   end subroutine init_preconditioner
 
   ! ---- accessors ----
@@ -438,6 +452,20 @@ contains
     class(feti_t), intent(in) :: this
     f_explicit = this%f%is_explicit()
   end function f_explicit
+
+  !> True when K^+ (and the explicit operators) are shared per class of
+  !> congruent subdomains (`&solver share_subdomains`).
+  logical function f_shared(this)
+    class(feti_t), intent(in) :: this
+    f_shared = this%f%is_shared()
+  end function f_shared
+
+  !> Classes of congruent subdomains on this rank (= the local subdomains
+  !> without sharing).
+  integer(ip) function f_classes(this)
+    class(feti_t), intent(in) :: this
+    f_classes = this%f%n_classes()
+  end function f_classes
 
   !> The dense F^s of local subdomain `ls` on its local dual rows `rows`
   !> (explicit F only; for tests).

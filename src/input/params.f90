@@ -86,6 +86,9 @@ module params
     !> operators, BLAS) | 'auto' (the cheaper one by the measured cost model)
     character(len=name_len) :: f_action = 'auto'
     character(len=name_len) :: f_storage = 'packed'      !< explicit F: 'packed' | 'symmetric' | 'general'
+    !> 'auto': one K^+ (and one explicit S^) per class of congruent subdomains
+    !> of a rank, when there are such classes | 'none': per subdomain
+    character(len=name_len) :: share_subdomains = 'auto'
     !> 'auto' (coarse_ranks decides) | 'redundant' (= coarse_ranks 1) | 'distributed' (= all ranks)
     character(len=name_len) :: coarse_placement = 'auto'
     integer(ip) :: coarse_ranks = 0           !< ranks per coarse group (0: chosen from the coarse dimension)
@@ -483,7 +486,7 @@ contains
                 regularization, active_tol, kkt_tol
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
-                               m_no_step, f_action, f_storage, preconditioner
+                               m_no_step, f_action, f_storage, share_subdomains, preconditioner
     character(len=path_len) :: directory
     logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report, coarse_ooc
     namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping, cluster
@@ -494,7 +497,7 @@ contains
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
       m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, rho_window, rho_stall, power_iterations, coarse, &
       coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
-      f_action, f_storage, &
+      f_action, f_storage, share_subdomains, &
       regularization, scaling, stopping, preconditioner, monitor
     namelist /reconstruction/ method, active_tol, kkt_tol
     character(len=name_len) :: run_name
@@ -538,7 +541,7 @@ contains
         rho_stall = s%rho_stall
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
-        f_action = s%f_action; f_storage = s%f_storage
+        f_action = s%f_action; f_storage = s%f_storage; share_subdomains = s%share_subdomains
         coarse_placement = s%coarse_placement; coarse_ranks = s%coarse_ranks
         coarse_blr = s%coarse_blr; coarse_ooc = s%coarse_ooc
         regularization = s%regularization; scaling = s%scaling; stopping = s%stopping; monitor = s%monitor
@@ -576,6 +579,7 @@ contains
                                  rho_contraction, rho_window, rho_stall, power_iterations, &
                                  lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
+                                 lower(share_subdomains), &
                                  lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, &
                                  regularization, lower(scaling), lower(stopping), lower(preconditioner), &
                                  monitor)
@@ -689,6 +693,8 @@ contains
         call fail('solver', 'f_action', "must be 'implicit', 'explicit' or 'auto'", s%f_action)
       if (.not. one_of(s%f_storage, [character(len=10) :: 'symmetric', 'packed', 'general'])) &
         call fail('solver', 'f_storage', "must be 'symmetric', 'packed' or 'general'", s%f_storage)
+      if (.not. one_of(s%share_subdomains, [character(len=10) :: 'auto', 'none'])) &
+        call fail('solver', 'share_subdomains', "must be 'auto' or 'none'", s%share_subdomains)
       if (s%regularization <= 0) &
         call fail('solver', 'regularization', 'must be > 0', reals([s%regularization]))
       if (.not. one_of(s%scaling, [character(len=8) :: 'none', 'young'])) &

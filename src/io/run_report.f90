@@ -41,7 +41,7 @@ contains
     type(feti_sizes_t) :: n
     character(len=:), allocatable :: memory
     integer(i8) :: f_bytes
-    real(dp) :: f_seconds, flops(2)
+    real(dp) :: f_seconds, flops(2), f_flops
     integer :: nranks, ierr
 
     op => dual%operators()
@@ -51,6 +51,7 @@ contains
     ! bytes one F action reads on all ranks, and the time of one F action
     call MPI_Allreduce(op%bytes_per_f_action(), f_bytes, 1, MPI_INT_I8, MPI_SUM, op%comm(), ierr)
     call MPI_Allreduce(op%setup_flops(), flops, 2, MPI_REAL_DP, MPI_SUM, op%comm(), ierr)
+    call MPI_Allreduce(op%flops_per_f_action(), f_flops, 1, MPI_REAL_DP, MPI_SUM, op%comm(), ierr)
     f_seconds = stat_max(stats, 'F action', 0.0_dp)/max(op%f_applications(), 1_i8)
 
     call js%begin_object()
@@ -138,6 +139,8 @@ contains
     call js%begin_object('performance')
     call js%add('f_bytes_per_action_sum', f_bytes)
     call js%add('f_action', trim(merge('explicit', 'implicit', op%f_explicit())))
+    call js%add('f_shared', op%f_shared())
+    call js%add('f_flops_per_action_sum', f_flops)
     call js%add_each([character(len=32) :: 'factorization_flops_sum', 'explicit_f_flops_sum'], flops)
     call js%add_each([character(len=32) :: 'f_action_seconds_per_call', 'f_bandwidth_bytes_per_second', &
                       'solve_seconds', 'solve_f_action_seconds', 'solve_coarse_seconds', 'solve_coarse_share'], &

@@ -1,0 +1,309 @@
+!> Dual operators of the form
+!>
+!>     y = sum_s a_s B^_s M_c(s) B^_s^T x,
+!>
+!> with one dense symmetric matrix M_c per class c of congruent subdomains
+!> (subdomain_classes) on the union U_c of the dofs that B touches in the
+!> class (n_c of them, the representative's local numbering), and a factor
+!> a_s per subdomain. B^_s: the entries of B^s with the dofs numbered in U_c.
+!> One application: gather the dual rows (neighbour exchange), per class the
+!> members' a_s B^_s^T x as the columns of X (n_c x m_c), Y = M_c X by ONE
+!> dgemm, y_s += B^_s Y(:, s), scatter-add. Used by f_operator (M_c = S^_c,
+!> the inverse of K_reg's Schur complement, a_s = 1/c_s) and by
+!> dual_preconditioner ('lumped': M_c = K_r(U_c, U_c), a_s = c_s / w_s^2).
+!> The class's matrix is read once per application for all its members, so
+!> the work is compute bound (dgemm) instead of memory bound. A sparse M_c
+!> (set_sparse: CSR, the lumped preconditioner's K_r(U_c, U_c)) is applied
+!> with the members' vectors as the rows of X^T (m_c x n_c): one contiguous
+!> axpy of length m_c per entry of M_c.
+module class_operator
+  use kinds, only: dp, ip, i8
+  use lapack_interfaces, only: dgemm
+  use errors, only: fatal_error
+  use b_operator, only: b_operator_t
+  use sorting, only: sort_unique
+  use subdomain_classes, only: subdomain_classes_t
+  use csr_matrix, only: csr_t
+  implicit none
+  private
+
+  type, public :: class_operator_t
+    type(subdomain_classes_t) :: classes
+    integer(ip), allocatable :: cn(:)             !< (nclass) n_c
+    integer(i8), allocatable :: coff(:)           !< (nclass+1) offsets of M_c (n_c x n_c, full) in mat
+    real(dp), allocatable :: mat(:)
+    real(dp), allocatable :: factor(:)            !< (nsub) a_s
+    integer(ip), allocatable :: eoff(:)           !< (nsub+1) offsets of the entries of B^_s
+    integer(ip), allocatable :: erow(:), edof(:)  !< local dual row, dof in U_c (1..n_c)
+    real(dp), allocatable :: eval(:)
+    integer(ip) :: n_local_rows = 0
+    logical :: sparse = .false.                   !< M_c in CSR (set_sparse) instead of dense
+    type(csr_t), allocatable :: smat(:)           !< (nclass) sparse M_c
+    real(dp), allocatable, private :: xw(:), yw(:), wloc(:), wloc2(:)
+  contains
+    procedure :: init
+    procedure :: class_dofs
+    procedure :: set_matrix
+    procedure :: set_sparse
+    procedure :: apply
+    procedure :: local_matrix
+    procedure :: bytes_per_action
+    procedure :: flops_per_action
+    procedure :: free
+  end type class_operator_t
+
+contains
+
+  !> The union dofs and the entries of B^_s per class of `classes` (from B);
+  !> the matrices are set afterwards by set_matrix, a_s = `factor(s)`.
+  subroutine init(this, b, classes, factor)
+    class(class_operator_t), intent(inout) :: this
+    type(b_operator_t), intent(in) :: b
+    type(subdomain_classes_t), intent(in) :: classes
+    real(dp), intent(in) :: factor(:)
+    integer(ip), allocatable :: row(:), dof(:), dofs(:), cmap(:)
+    real(dp), allocatable :: val(:)
+    integer(ip) :: nsub, s, c, n, ne, kk, e, wmax, i
+    call this%free()
+    this%classes = classes
+    nsub = size(classes%class_of, kind=ip)
+    if (size(factor, kind=ip) /= nsub) call fatal_error('class_operator%init: one factor per subdomain')
+    this%factor = factor
+    this%n_local_rows = b%n_local_rows()
+    allocate (this%cn(classes%nclass), this%coff(classes%nclass + 1), this%eoff(nsub + 1))
+    ne = 0
+    this%eoff(1) = 0
+    do s = 1, nsub
+      call b%subdomain_entries(s, row, dof, val)
+      ne = ne + size(row, kind=ip)
+      this%eoff(s + 1) = ne
+    end do
+    allocate (this%erow(ne), this%edof(ne), this%eval(ne))
+    this%coff(1) = 0
+    wmax = 1
+    do c = 1, classes%nclass
+      call this%class_dofs(b, c, dofs)
+      n = size(dofs, kind=ip)
+      this%cn(c) = n
+      this%coff(c + 1) = this%coff(c) + int(n, i8)*n
+      wmax = max(wmax, n*(classes%moff(c + 1) - classes%moff(c)))
+      allocate (cmap(maxval([0_ip, dofs])))
+      cmap = 0
+      do i = 1, n
+        cmap(dofs(i)) = i
+      end do
+      do kk = classes%moff(c) + 1, classes%moff(c + 1)
+        s = classes%member(kk)
+        call b%subdomain_entries(s, row, dof, val)
+        do e = 1, size(row, kind=ip)
+          this%erow(this%eoff(s) + e) = row(e)
+          this%edof(this%eoff(s) + e) = cmap(dof(e))
+          this%eval(this%eoff(s) + e) = val(e)
+        end do
+      end do
+      deallocate (cmap)
+    end do
+    allocate (this%mat(this%coff(classes%nclass + 1)), this%xw(wmax), this%yw(wmax))
+    allocate (this%wloc(max(1, this%n_local_rows)), this%wloc2(max(1, this%n_local_rows)))
+    this%mat = 0
+  end subroutine init
+
+  !> U_c: the union over the members of class `c` of the dofs B^s touches
+  !> (ascending, local numbering of the class).
+  subroutine class_dofs(this, b, c, dofs)
+    class(class_operator_t), intent(in) :: this
+    type(b_operator_t), intent(in) :: b
+    integer(ip), intent(in) :: c
+    integer(ip), allocatable, intent(out) :: dofs(:)
+    integer(ip), allocatable :: row(:), dof(:), all(:)
+    real(dp), allocatable :: val(:)
+    integer(ip) :: k, n, total
+    total = 0
+    do k = this%classes%moff(c) + 1, this%classes%moff(c + 1)
+      call b%subdomain_entries(this%classes%member(k), row, dof, val)
+      total = total + size(dof, kind=ip)
+    end do
+    allocate (all(total))
+    total = 0
+    do k = this%classes%moff(c) + 1, this%classes%moff(c + 1)
+      call b%subdomain_entries(this%classes%member(k), row, dof, val)
+      all(total + 1:total + size(dof)) = dof
+      total = total + size(dof, kind=ip)
+    end do
+    call sort_unique(all, n)
+    dofs = all(1:n)
+  end subroutine class_dofs
+
+  !> M_c = `m` (n_c x n_c, symmetric, both triangles).
+  subroutine set_matrix(this, c, m)
+    class(class_operator_t), intent(inout) :: this
+    integer(ip), intent(in) :: c
+    real(dp), intent(in) :: m(:, :)
+    integer(ip) :: n
+    n = this%cn(c)
+    if (size(m, 1) /= n .or. size(m, 2) /= n) call fatal_error('class_operator%set_matrix: n_c x n_c expected')
+    this%mat(this%coff(c) + 1:this%coff(c + 1)) = reshape(m, [int(n, i8)*n])
+  end subroutine set_matrix
+
+  !> M_c = `m` (n_c x n_c CSR, symmetric, both triangles); then every class
+  !> must be set this way (the dense storage is released).
+  subroutine set_sparse(this, c, m)
+    class(class_operator_t), intent(inout) :: this
+    integer(ip), intent(in) :: c
+    type(csr_t), intent(in) :: m
+    if (m%nrows /= this%cn(c) .or. m%ncols /= this%cn(c)) call fatal_error('class_operator%set_sparse: n_c x n_c expected')
+    if (.not. allocated(this%smat)) allocate (this%smat(this%classes%nclass))
+    this%smat(c) = m
+    this%sparse = .true.
+    if (allocated(this%mat)) deallocate (this%mat)
+  end subroutine set_sparse
+
+  !> y = sum_s a_s B^_s M_c(s) B^_s^T x (dual vectors, owned rows). Collective
+  !> (the neighbour exchange of B).
+  subroutine apply(this, b, x, y)
+    class(class_operator_t), intent(inout) :: this
+    type(b_operator_t), intent(inout) :: b
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(inout) :: y(:)
+    integer(ip) :: c, n, m, kk, s, e, j
+    integer(i8) :: o
+    real(dp) :: w
+    call b%gather_rows(x, this%wloc)
+    this%wloc2 = 0
+    associate (cl => this%classes)
+      do c = 1, cl%nclass
+        n = this%cn(c)
+        m = cl%moff(c + 1) - cl%moff(c)
+        if (n == 0) cycle
+        if (this%sparse) then
+          call apply_sparse(c, n, m, this%xw, this%yw)
+          cycle
+        end if
+        this%xw(1:n*m) = 0
+        do kk = cl%moff(c) + 1, cl%moff(c + 1)
+          s = cl%member(kk)
+          o = int(kk - cl%moff(c) - 1, i8)*n
+          w = this%factor(s)
+          do e = this%eoff(s) + 1, this%eoff(s + 1)
+            j = this%edof(e)
+            this%xw(o + j) = this%xw(o + j) + w*this%eval(e)*this%wloc(this%erow(e))
+          end do
+        end do
+        call dgemm('N', 'N', n, m, n, 1.0_dp, this%mat(this%coff(c) + 1), n, this%xw, n, 0.0_dp, this%yw, n)
+        do kk = cl%moff(c) + 1, cl%moff(c + 1)
+          s = cl%member(kk)
+          o = int(kk - cl%moff(c) - 1, i8)*n
+          do e = this%eoff(s) + 1, this%eoff(s + 1)
+            this%wloc2(this%erow(e)) = this%wloc2(this%erow(e)) + this%eval(e)*this%yw(o + this%edof(e))
+          end do
+        end do
+      end do
+    end associate
+    call b%scatter_rows(this%wloc2, y)
+  contains
+    !> Class c with a sparse M_c: X^T and Y^T are m x n (member, dof).
+    subroutine apply_sparse(c, n, m, xt, yt)
+      integer(ip), intent(in) :: c, n, m
+      real(dp), intent(inout) :: xt(m, n), yt(m, n)
+      integer(ip) :: i, k, col
+      associate (cl => this%classes, a => this%smat(c))
+        xt = 0
+        do kk = cl%moff(c) + 1, cl%moff(c + 1)
+          s = cl%member(kk)
+          col = kk - cl%moff(c)
+          w = this%factor(s)
+          do e = this%eoff(s) + 1, this%eoff(s + 1)
+            j = this%edof(e)
+            xt(col, j) = xt(col, j) + w*this%eval(e)*this%wloc(this%erow(e))
+          end do
+        end do
+        do i = 1, n
+          yt(:, i) = 0
+          do k = a%rowptr(i), a%rowptr(i + 1) - 1
+            yt(:, i) = yt(:, i) + a%values(k)*xt(:, a%colind(k))
+          end do
+        end do
+        do kk = cl%moff(c) + 1, cl%moff(c + 1)
+          s = cl%member(kk)
+          col = kk - cl%moff(c)
+          do e = this%eoff(s) + 1, this%eoff(s + 1)
+            this%wloc2(this%erow(e)) = this%wloc2(this%erow(e)) + this%eval(e)*yt(col, this%edof(e))
+          end do
+        end do
+      end associate
+    end subroutine apply_sparse
+  end subroutine apply
+
+  !> The dense a_s B^_s M_c B^_s^T of local subdomain `s` on its local dual
+  !> rows `rows` (for tests).
+  subroutine local_matrix(this, s, rows, fs)
+    class(class_operator_t), intent(in) :: this
+    integer(ip), intent(in) :: s
+    integer(ip), allocatable, intent(out) :: rows(:)
+    real(dp), allocatable, intent(out) :: fs(:, :)
+    integer(ip) :: c, n, i, j, e1, e2, nb
+    integer(i8) :: o
+    c = this%classes%class_of(s)
+    n = this%cn(c)
+    o = this%coff(c)
+    if (this%sparse) call fatal_error('class_operator%local_matrix: dense storage only')
+    nb = this%eoff(s + 1) - this%eoff(s)
+    rows = this%erow(this%eoff(s) + 1:this%eoff(s + 1))
+    allocate (fs(nb, nb))
+    do j = 1, nb
+      e2 = this%eoff(s) + j
+      do i = 1, nb
+        e1 = this%eoff(s) + i
+        fs(i, j) = this%factor(s)*this%eval(e1)*this%mat(o + int(this%edof(e2) - 1, i8)*n + this%edof(e1))* &
+                   this%eval(e2)
+      end do
+    end do
+  end subroutine local_matrix
+
+  !> Bytes one application reads and writes on this rank: every M_c once
+  !> (n_c^2 values: dgemm reads the full square), the entries of B twice (16
+  !> bytes each), 4 passes over the local dual rows and X, Y (zeroed, added
+  !> to, written by dgemm, read: 4 n_c m_c values per class).
+  integer(i8) function bytes_per_action(this)
+    class(class_operator_t), intent(in) :: this
+    integer(ip) :: c
+    bytes_per_action = 2*16*int(size(this%erow), i8) + 4*8*int(this%n_local_rows, i8)
+    do c = 1, this%classes%nclass
+      if (this%sparse) then
+        bytes_per_action = bytes_per_action + 12*int(this%smat(c)%nnz(), i8) + &
+                           4*8*int(this%cn(c), i8)*(this%classes%moff(c + 1) - this%classes%moff(c))
+        cycle
+      end if
+      bytes_per_action = bytes_per_action + 8*int(this%cn(c), i8)*this%cn(c) + &
+                         4*8*int(this%cn(c), i8)*(this%classes%moff(c + 1) - this%classes%moff(c))
+    end do
+  end function bytes_per_action
+
+  !> Flops of one application on this rank: 2 n_c^2 m_c per class (dgemm).
+  real(dp) function flops_per_action(this)
+    class(class_operator_t), intent(in) :: this
+    integer(ip) :: c
+    flops_per_action = 0
+    do c = 1, this%classes%nclass
+      if (this%sparse) then
+        flops_per_action = flops_per_action + 2*real(this%smat(c)%nnz(), dp)*(this%classes%moff(c + 1) - &
+                                                                              this%classes%moff(c))
+        cycle
+      end if
+      flops_per_action = flops_per_action + 2*real(this%cn(c), dp)**2*(this%classes%moff(c + 1) - this%classes%moff(c))
+    end do
+  end function flops_per_action
+
+  subroutine free(this)
+    class(class_operator_t), intent(inout) :: this
+    if (allocated(this%cn)) deallocate (this%cn, this%coff)
+    if (allocated(this%mat)) deallocate (this%mat)
+    if (allocated(this%factor)) deallocate (this%factor)
+    if (allocated(this%eoff)) deallocate (this%eoff, this%erow, this%edof, this%eval)
+    if (allocated(this%xw)) deallocate (this%xw, this%yw, this%wloc, this%wloc2)
+    if (allocated(this%smat)) deallocate (this%smat)
+    this%sparse = .false.
+    this%classes = subdomain_classes_t()
+    this%n_local_rows = 0
+  end subroutine free
+end module class_operator

@@ -1,0 +1,159 @@
+!> Classes of congruent subdomains on one rank: subdomains whose stiffness
+!> matrices are the same matrix up to a factor, K^s = c_s K^r (r the class's
+!> representative, c_r = 1). That is the case of identical boxes in local
+!> numbering with the same Poisson ratio and Young's moduli differing by a
+!> factor per subdomain (docs/THEORY.md "Shared local operators"). Then
+!> K_reg^s = c_s K_reg^r (rho_f is relative to the mean diagonal, the fixing
+!> nodes and R span the same kernel), so K^+ of s is K_reg^r^{-1} / c_s, and
+!> one factorization (one explicit S^) serves the whole class.
+!>
+!> The test compares the matrices themselves, so it covers geometry, local
+!> numbering, connectivity and material at once: the same order, the same
+!> sparsity pattern (rowptr, colind), c_s = the ratio of the first diagonal
+!> entries, and max |K^s - c_s K^r| <= tol max |K^s| with
+!>
+!>     tol = share_rounding_factor * eps * (max |x| / h_min + 1),
+!>
+!> x the node coordinates and h_min the shortest element edge of the
+!> subdomain: the node coordinates carry an absolute rounding of eps max|x|,
+!> which the Jacobians of the elements see relative to the edge length, so
+!> two congruent boxes placed at different positions of the global mesh give
+!> stiffness matrices that differ by that relative amount (times a small
+!> factor for the quadrature's arithmetic). Anything larger (a distorted mesh,
+!> METIS subdomains, per-element moduli) is a different class, and a rank
+!> whose subdomains are all different has one class per subdomain: the
+!> callers then take the per-subdomain paths.
+module subdomain_classes
+  use kinds, only: dp, ip
+  use subdomain, only: subdomain_t
+  implicit none
+  private
+
+  public :: find_classes, share_tolerance, stiffness_deviation
+
+  !> Multiple of eps * (max|x| / h_min + 1) accepted between the members of a class.
+  real(dp), parameter, public :: share_rounding_factor = 64
+  !> At most this many classes are tried per subdomain (a rank with more
+  !> distinct subdomains gets one class per subdomain without more comparisons).
+  integer(ip), parameter :: max_classes = 64
+
+  type, public :: subdomain_classes_t
+    integer(ip) :: nclass = 0
+    integer(ip), allocatable :: class_of(:)   !< (nsub) class of each subdomain
+    integer(ip), allocatable :: rep(:)        !< (nclass) representative (local subdomain index)
+    integer(ip), allocatable :: moff(:)       !< (nclass+1) members of class c: member(moff(c)+1:moff(c+1))
+    integer(ip), allocatable :: member(:)     !< (nsub) subdomains by class, ascending within a class
+    integer(ip), allocatable :: column(:)     !< (nsub) position of s among its class's members
+    real(dp), allocatable :: scale(:)         !< (nsub) c_s: K^s = c_s K^rep
+    real(dp) :: max_deviation = 0             !< max over members of max|K^s - c_s K^r| / max|K^s|
+  contains
+    procedure :: shared
+  end type subdomain_classes_t
+
+contains
+
+  !> Group `subs` (K assembled, coordinates set) into classes; `enabled`
+  !> false gives one class per subdomain.
+  subroutine find_classes(subs, classes, enabled)
+    type(subdomain_t), intent(in) :: subs(:)
+    type(subdomain_classes_t), intent(out) :: classes
+    logical, intent(in) :: enabled
+    integer(ip) :: n, s, c, k, cnt(size(subs) + 1)
+    real(dp) :: dev, scale
+    n = size(subs, kind=ip)
+    allocate (classes%class_of(n), classes%scale(n), classes%column(n), classes%member(n))
+    allocate (classes%rep(n))
+    classes%nclass = 0
+    classes%max_deviation = 0
+    do s = 1, n
+      classes%class_of(s) = 0
+      classes%scale(s) = 1
+      if (enabled) then
+        do c = 1, min(classes%nclass, max_classes)
+          call stiffness_deviation(subs(s), subs(classes%rep(c)), scale, dev)
+          if (dev <= share_tolerance(subs(s))) then
+            classes%class_of(s) = c
+            classes%scale(s) = scale
+            classes%max_deviation = max(classes%max_deviation, dev)
+            exit
+          end if
+        end do
+      end if
+      if (classes%class_of(s) == 0) then
+        classes%nclass = classes%nclass + 1
+        classes%rep(classes%nclass) = s
+        classes%class_of(s) = classes%nclass
+      end if
+    end do
+    classes%rep = classes%rep(1:classes%nclass)
+    ! members by class
+    cnt = 0
+    do s = 1, n
+      cnt(classes%class_of(s) + 1) = cnt(classes%class_of(s) + 1) + 1
+    end do
+    allocate (classes%moff(classes%nclass + 1))
+    classes%moff(1) = 0
+    do c = 1, classes%nclass
+      classes%moff(c + 1) = classes%moff(c) + cnt(c + 1)
+    end do
+    cnt(1:classes%nclass) = 0
+    do s = 1, n
+      c = classes%class_of(s)
+      cnt(c) = cnt(c) + 1
+      k = classes%moff(c) + cnt(c)
+      classes%member(k) = s
+      classes%column(s) = cnt(c)
+    end do
+  end subroutine find_classes
+
+  !> True when some class has more than one member.
+  logical function shared(this)
+    class(subdomain_classes_t), intent(in) :: this
+    shared = .false.
+    if (allocated(this%class_of)) shared = this%nclass < size(this%class_of, kind=ip)
+  end function shared
+
+  !> share_rounding_factor * eps * (max|x| / h_min + 1) of `sub` (see the module).
+  real(dp) function share_tolerance(sub)
+    type(subdomain_t), intent(in) :: sub
+    real(dp) :: xmax, hmin, d
+    integer(ip) :: e, k
+    integer(ip), parameter :: other(3) = [2, 4, 5]   ! Q1 order: the edges from node 1
+    xmax = maxval(abs(sub%coords))
+    hmin = huge(1.0_dp)
+    do e = 1, sub%nelem
+      do k = 1, 3
+        d = norm2(sub%coords(:, sub%elem_nodes(other(k), e)) - sub%coords(:, sub%elem_nodes(1, e)))
+        hmin = min(hmin, d)
+      end do
+    end do
+    share_tolerance = 0
+    if (hmin > 0) share_tolerance = share_rounding_factor*epsilon(1.0_dp)*(xmax/hmin + 1)
+  end function share_tolerance
+
+  !> c = K^a(1,1) / K^b(1,1) and dev = max|K^a - c K^b| / max|K^a| when the
+  !> two matrices have the same order and pattern; dev = huge otherwise.
+  subroutine stiffness_deviation(a, b, c, dev)
+    type(subdomain_t), intent(in) :: a, b
+    real(dp), intent(out) :: c, dev
+    integer(ip) :: k
+    real(dp) :: amax
+    c = 1
+    dev = huge(1.0_dp)
+    if (a%ndof /= b%ndof .or. a%nelem /= b%nelem) return
+    if (.not. allocated(a%K%values) .or. .not. allocated(b%K%values)) return
+    if (size(a%K%values) /= size(b%K%values)) return
+    if (any(a%K%rowptr /= b%K%rowptr)) return
+    if (any(a%K%colind /= b%K%colind)) return
+    if (.not. (a%K%values(1) > 0 .and. b%K%values(1) > 0)) return
+    ! the first stored entry of row 1 is the diagonal when colind(1) = 1
+    if (a%K%colind(1) /= 1) return
+    c = a%K%values(1)/b%K%values(1)
+    amax = maxval(abs(a%K%values))
+    dev = 0
+    do k = 1, size(a%K%values, kind=ip)
+      dev = max(dev, abs(a%K%values(k) - c*b%K%values(k)))
+    end do
+    dev = dev/amax
+  end subroutine stiffness_deviation
+end module subdomain_classes
