@@ -42,12 +42,13 @@ module coarse_problem
                      MPI_Allgatherv, MPI_Isend, MPI_Irecv, MPI_Waitall, MPI_Request, MPI_STATUSES_IGNORE, &
                      MPI_INTEGER, MPI_Comm_split, &
                      MPI_Comm_free, MPI_COMM_NULL, MPI_UNDEFINED, MPI_IN_PLACE, &
+                     MPI_Comm_split_type, MPI_COMM_TYPE_SHARED, MPI_INFO_NULL, MPI_Allreduce, MPI_MIN, &
                      operator(/=)
   implicit none
   private
 
   public :: coarse_layout_t, build_coarse_layout, owned_row_blocks, row_blocks
-  public :: coarse_options_t, group_starts, choose_coarse_ranks, estimated_factor_bytes
+  public :: coarse_options_t, group_starts, choose_coarse_ranks, estimated_factor_bytes, ranks_per_node
 
   !> How the coarse problem is factorized (&solver coarse_ranks, coarse_blr,
   !> coarse_ooc).
@@ -61,6 +62,15 @@ module coarse_problem
   !> a group's ranks should stay below this many bytes per rank (see
   !> choose_coarse_ranks and docs/INPUT.md).
   integer(i8), parameter, public :: coarse_bytes_per_rank = 1073741824_i8
+
+  !> Above this estimated factor size the automatic group takes at least the
+  !> ranks that share a node: every rank of a redundant group streams the
+  !> whole factor in each solve, so ranks of one node compete for its memory
+  !> bandwidth. Measured on 2 ranks of one node (docs/RESULTS.md "Coarse
+  !> groups and the node's memory bandwidth"): one group of 2 ranks solves
+  !> 1.7x faster at 4096 subdomains (estimate 210 MB) and 1.4x at 512 (13
+  !> MB), 1.6x slower at 64 (0.8 MB); the threshold lies between.
+  integer(i8), parameter, public :: coarse_node_share_bytes = 4194304_i8
 
   !> Where the coarse blocks of every subdomain live.
   type :: coarse_layout_t
@@ -445,16 +455,22 @@ contains
   !> Ranks per coarse group from &solver coarse_ranks and coarse_placement on
   !> `nranks` ranks with `nsub` subdomains: 'redundant' 1, 'distributed' all
   !> ranks, coarse_ranks > 0 itself, else (auto) the fewest ranks that keep the
-  !> estimated factor below coarse_bytes_per_rank per rank, at least 1 and at
-  !> most nranks. `msg` is not empty when the value cannot be used.
-  subroutine choose_coarse_ranks(coarse_ranks, placement, nranks, nsub, c, msg)
+  !> estimated factor below coarse_bytes_per_rank per rank and, when the
+  !> estimate exceeds coarse_node_share_bytes, at least `node_ranks` (the
+  !> ranks sharing a node, default 1); at least 1 and at most nranks. `msg`
+  !> is not empty when the value cannot be used.
+  subroutine choose_coarse_ranks(coarse_ranks, placement, nranks, nsub, c, msg, node_ranks)
     integer(ip), intent(in) :: coarse_ranks
     character(len=*), intent(in) :: placement
     integer, intent(in) :: nranks
     integer(ip), intent(in) :: nsub
     integer, intent(out) :: c
     character(len=*), intent(out) :: msg
+    integer, intent(in), optional :: node_ranks
+    integer :: per_node
     msg = ''
+    per_node = 1
+    if (present(node_ranks)) per_node = max(1, node_ranks)
     select case (placement)
     case ('redundant')
       c = 1
@@ -474,9 +490,24 @@ contains
       else
         c = int(min(int(nranks, i8), max(1_i8, &
                 (estimated_factor_bytes(nsub) + coarse_bytes_per_rank - 1)/coarse_bytes_per_rank)))
+        if (estimated_factor_bytes(nsub) > coarse_node_share_bytes) c = max(c, min(per_node, nranks))
       end if
     end select
   end subroutine choose_coarse_ranks
+
+  !> The number of ranks of `comm` that share a node with each other (the
+  !> smallest over the nodes, so that every rank gets the same value).
+  !> Collective.
+  integer function ranks_per_node(comm) result(n)
+    type(MPI_Comm), intent(in) :: comm
+    type(MPI_Comm) :: node
+    integer :: rank, local, ierr
+    call MPI_Comm_rank(comm, rank, ierr)
+    call MPI_Comm_split_type(comm, MPI_COMM_TYPE_SHARED, rank, MPI_INFO_NULL, node, ierr)
+    call MPI_Comm_size(node, local, ierr)
+    call MPI_Comm_free(node, ierr)
+    call MPI_Allreduce(local, n, 1, MPI_INTEGER, MPI_MIN, comm, ierr)
+  end function ranks_per_node
 
   !> The group communicators for `c` ranks per group (c <= 0 or c >= P: one
   !> group). Collective over this%comm.

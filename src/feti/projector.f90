@@ -9,7 +9,7 @@ module projector
   use decomposition, only: decomposition_t
   use constraints, only: constraints_t
   use coarse_problem, only: coarse_problem_t, coarse_layout_t, build_coarse_layout, coarse_options_t, &
-                            choose_coarse_ranks
+                            choose_coarse_ranks, ranks_per_node
   use params, only: solver_params_t
   use errors, only: collective_error, exit_input_error
   use logger, only: log_message
@@ -57,7 +57,8 @@ contains
     call this%free()
     this%comm = comm
     call MPI_Comm_size(comm, nranks, ierr)
-    call choose_coarse_ranks(s%coarse_ranks, s%coarse_placement, nranks, dec%nsubdomains, c, msg)
+    call choose_coarse_ranks(s%coarse_ranks, s%coarse_placement, nranks, dec%nsubdomains, c, msg, &
+                             node_ranks=ranks_per_node(comm))
     if (len_trim(msg) > 0) call collective_error(msg, comm, exit_input_error)
     this%options = coarse_options_t(c, s%coarse_blr, s%coarse_ooc)
     con => b%constraints()
