@@ -48,7 +48,8 @@ contains
     type(subdomain_t), intent(inout) :: sub
     integer(ip), allocatable :: nptr(:), nelems(:), adjptr(:), adj(:), marker(:)
     integer(ip) :: n, e, a, b, i, j, k, m, c, nadj, first, row, base, pos, ln(8)
-    real(dp) :: ke(24, 24), x(3, 8)
+    real(dp) :: ke(24, 24), x(3, 8), xrel(3, 8), xrel_prev(3, 8), same_shape
+    logical :: have_prev
 
     n = sub%nnodes
     ! node -> elements
@@ -106,11 +107,22 @@ contains
       end do
     end do
     sub%K%values = 0
-    ! element matrices
+    ! element matrices; an element that is a translate of the previous one
+    ! (node offsets equal to within the rounding of the coordinates, as in
+    ! every undistorted box) reuses its matrix: K_e depends on the offsets only
+    same_shape = 8*epsilon(1.0_dp)*max(1.0_dp, maxval(abs(sub%coords)))
+    have_prev = .false.
     do e = 1, sub%nelem
       ln = sub%elem_nodes(:, e)
       x = sub%coords(:, ln)
-      call q1_stiffness(x, sub%young, sub%poisson, ke)
+      do i = 1, 8
+        xrel(:, i) = x(:, i) - x(:, 1)
+      end do
+      if (.not. (have_prev .and. maxval(abs(xrel - xrel_prev)) <= same_shape)) then
+        call q1_stiffness(x, sub%young, sub%poisson, ke)
+        xrel_prev = xrel
+        have_prev = .true.
+      end if
       do i = 1, 8
         a = ln(i)
         do j = 1, 8
