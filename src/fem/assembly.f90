@@ -49,7 +49,7 @@ contains
     integer(ip), allocatable :: nptr(:), nelems(:), adjptr(:), adj(:), marker(:)
     integer(ip) :: n, e, a, b, i, j, k, m, c, nadj, first, row, base, pos, ln(8)
     real(dp) :: ke(24, 24), x(3, 8), xrel(3, 8), xrel_prev(3, 8), same_shape
-    logical :: have_prev
+    logical :: have_prev, reuse
 
     n = sub%nnodes
     ! node -> elements
@@ -118,7 +118,9 @@ contains
       do i = 1, 8
         xrel(:, i) = x(:, i) - x(:, 1)
       end do
-      if (.not. (have_prev .and. maxval(abs(xrel - xrel_prev)) <= same_shape)) then
+      reuse = have_prev
+      if (reuse) reuse = maxval(abs(xrel - xrel_prev)) <= same_shape   ! (no short-circuit in Fortran)
+      if (.not. reuse) then
         call q1_stiffness(x, sub%young, sub%poisson, ke)
         xrel_prev = xrel
         have_prev = .true.

@@ -145,11 +145,9 @@ contains
     type(subdomain_t), intent(in) :: subs(:)
     real(dp), intent(in) :: regularization
     character(len=*), intent(in) :: storage
-    integer(ip), allocatable :: row(:), dof(:), cmap(:), dofs(:), irn(:), jcn(:), perm(:)
-    real(dp), allocatable :: val(:), a(:), sd(:, :)
-    type(mumps_t) :: m
-    integer(ip) :: s, e, ne, ndmax, n, i, j, k
-    integer :: info
+    integer(ip), allocatable :: row(:), dof(:), cmap(:), dofs(:)
+    real(dp), allocatable :: val(:), sd(:, :)
+    integer(ip) :: s, e, ne, ndmax, n, i, j
     integer(i8) :: o
 
     if (storage /= 'symmetric' .and. storage /= 'packed' .and. storage /= 'general') &
@@ -200,38 +198,7 @@ contains
         this%eval(this%eoff(s) + e) = val(e)
       end do
       if (n == 0) cycle
-      ! the Schur complement of K_reg on the touched dofs (K_reg itself if B touches all)
-      call regularized_system(subs(s), regularization, 'amd', irn, jcn, a, perm)
-      if (allocated(sd)) deallocate (sd)
-      allocate (sd(n, n))
-      if (n == subs(s)%ndof) then
-        sd = 0
-        do k = 1, size(a, kind=ip)
-          i = cmap(irn(k))
-          j = cmap(jcn(k))
-          sd(i, j) = sd(i, j) + a(k)
-          if (i /= j) sd(j, i) = sd(j, i) + a(k)
-        end do
-      else
-        call timer_start('explicit F: Schur')
-        call m%init(MPI_COMM_SELF, spd=.true.)
-        call m%set_centralized(subs(s)%ndof, irn, jcn, a)
-        call m%set_ordering('amd')
-        call m%set_schur(dofs)
-        call m%factorize()
-        call m%schur_complement(sd)
-        this%build_flop_count = this%build_flop_count + m%factor_flops()
-        call m%free()
-        call timer_stop('explicit F: Schur')
-      end if
-      ! S^_s = its inverse (upper triangle): n^3/3 + 2n^3/3 flops
-      this%build_flop_count = this%build_flop_count + real(n, dp)**3
-      call timer_start('explicit F: inverse')
-      call dpotrf('U', n, sd, n, info)
-      if (info == 0) call dpotri('U', n, sd, n, info)
-      if (info /= 0) call fatal_error('f_operator%build_explicit: the Schur complement of K_reg is not '// &
-                                      'positive definite (LAPACK dpotrf/dpotri failed)')
-      call timer_stop('explicit F: inverse')
+      call touched_inverse(subs(s), regularization, dofs, sd, this%build_flop_count)
       o = this%soff(s)
       do j = 1, n
         if (storage == 'packed') then
@@ -520,11 +487,9 @@ contains
     type(b_operator_t), intent(in) :: b
     type(subdomain_t), intent(in) :: subs(:)
     real(dp), intent(in) :: regularization
-    integer(ip), allocatable :: cmap(:), dofs(:), irn(:), jcn(:), perm(:)
-    real(dp), allocatable :: a(:), sd(:, :)
-    type(mumps_t) :: m
-    integer(ip) :: c, r, n, i, j, k
-    integer :: info
+    integer(ip), allocatable :: dofs(:)
+    real(dp), allocatable :: sd(:, :)
+    integer(ip) :: c, r, n, j
 
     this%storage = 'general'
     call this%shared_op%init(b, this%classes, 1/this%classes%scale)
@@ -533,42 +498,7 @@ contains
       call this%shared_op%class_dofs(b, c, dofs)
       n = size(dofs, kind=ip)
       if (n == 0) cycle
-      if (allocated(cmap)) deallocate (cmap)
-      allocate (cmap(subs(r)%ndof))
-      cmap = 0
-      do i = 1, n
-        cmap(dofs(i)) = i
-      end do
-      call regularized_system(subs(r), regularization, 'amd', irn, jcn, a, perm)
-      if (allocated(sd)) deallocate (sd)
-      allocate (sd(n, n))
-      if (n == subs(r)%ndof) then
-        sd = 0
-        do k = 1, size(a, kind=ip)
-          i = cmap(irn(k))
-          j = cmap(jcn(k))
-          sd(i, j) = sd(i, j) + a(k)
-          if (i /= j) sd(j, i) = sd(j, i) + a(k)
-        end do
-      else
-        call timer_start('explicit F: Schur')
-        call m%init(MPI_COMM_SELF, spd=.true.)
-        call m%set_centralized(subs(r)%ndof, irn, jcn, a)
-        call m%set_ordering('amd')
-        call m%set_schur(dofs)
-        call m%factorize()
-        call m%schur_complement(sd)
-        this%build_flop_count = this%build_flop_count + m%factor_flops()
-        call m%free()
-        call timer_stop('explicit F: Schur')
-      end if
-      this%build_flop_count = this%build_flop_count + real(n, dp)**3
-      call timer_start('explicit F: inverse')
-      call dpotrf('U', n, sd, n, info)
-      if (info == 0) call dpotri('U', n, sd, n, info)
-      if (info /= 0) call fatal_error('f_operator%build_explicit: the Schur complement of K_reg is not '// &
-                                      'positive definite (LAPACK dpotrf/dpotri failed)')
-      call timer_stop('explicit F: inverse')
+      call touched_inverse(subs(r), regularization, dofs, sd, this%build_flop_count)
       do j = 1, n
         sd(j + 1:n, j) = sd(j, j + 1:n)
       end do
@@ -576,5 +506,59 @@ contains
     end do
     this%explicit = .true.
   end subroutine build_explicit_shared
+
+  !> S^ = (the Schur complement of K_reg of `sub` on its dofs `dofs`)^{-1},
+  !> K_reg exactly as K^+ builds it (kplus::regularized_system): the Schur
+  !> complement by MUMPS (K_reg itself when `dofs` are all the dofs), its
+  !> inverse by LAPACK (upper triangle of `sd` set; n^3/3 + 2n^3/3 flops,
+  !> added to `flops` with MUMPS's count of the elimination).
+  subroutine touched_inverse(sub, regularization, dofs, sd, flops)
+    type(subdomain_t), intent(in) :: sub
+    real(dp), intent(in) :: regularization
+    integer(ip), intent(in) :: dofs(:)
+    real(dp), allocatable, intent(out) :: sd(:, :)
+    real(dp), intent(inout) :: flops
+    integer(ip), allocatable :: cmap(:), irn(:), jcn(:), perm(:)
+    real(dp), allocatable :: a(:)
+    type(mumps_t) :: m
+    integer(ip) :: n, i, j, k
+    integer :: info
+
+    n = size(dofs, kind=ip)
+    call regularized_system(sub, regularization, 'amd', irn, jcn, a, perm)
+    allocate (sd(n, n))
+    if (n == sub%ndof) then
+      allocate (cmap(sub%ndof))
+      cmap = 0
+      do i = 1, n
+        cmap(dofs(i)) = i
+      end do
+      sd = 0
+      do k = 1, size(a, kind=ip)
+        i = cmap(irn(k))
+        j = cmap(jcn(k))
+        sd(i, j) = sd(i, j) + a(k)
+        if (i /= j) sd(j, i) = sd(j, i) + a(k)
+      end do
+    else
+      call timer_start('explicit F: Schur')
+      call m%init(MPI_COMM_SELF, spd=.true.)
+      call m%set_centralized(sub%ndof, irn, jcn, a)
+      call m%set_ordering('amd')
+      call m%set_schur(dofs)
+      call m%factorize()
+      call m%schur_complement(sd)
+      flops = flops + m%factor_flops()
+      call m%free()
+      call timer_stop('explicit F: Schur')
+    end if
+    flops = flops + real(n, dp)**3
+    call timer_start('explicit F: inverse')
+    call dpotrf('U', n, sd, n, info)
+    if (info == 0) call dpotri('U', n, sd, n, info)
+    if (info /= 0) call fatal_error('f_operator%build_explicit: the Schur complement of K_reg is not '// &
+                                    'positive definite (LAPACK dpotrf/dpotri failed)')
+    call timer_stop('explicit F: inverse')
+  end subroutine touched_inverse
 
 end module f_operator
