@@ -28,6 +28,9 @@ module params
     character(len=name_len) :: mapping = 'block'      !< subdomains to ranks: 'block' | 'metis'
     !> hybrid TFETI: subdomains per cluster per direction (1,1,1: plain TFETI)
     integer(ip) :: cluster(3) = [1, 1, 1]
+    !> decomposition = 'metis': elements per block edge of the block grid METIS
+    !> partitions (0: automatic, see src/mesh/decomposition.f90)
+    integer(ip) :: metis_block = 0
   end type mesh_params_t
 
   type, public :: material_params_t
@@ -478,7 +481,8 @@ contains
     character(len=*), intent(in), optional :: group_text
     character(len=*), intent(out), optional :: written(:)
     logical :: reading
-    integer(ip) :: nsub(3), nel(3), cluster(3), distortion_seed, seed, max_outer, max_hessian, power_iterations, coarse_ranks, &
+    integer(ip) :: nsub(3), nel(3), cluster(3), metis_block, distortion_seed, seed, max_outer, max_hessian, power_iterations, &
+                   coarse_ranks, &
                    rho_window
     real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, rho_growth, &
@@ -489,7 +493,7 @@ contains
                                m_no_step, f_action, f_storage, share_subdomains, preconditioner
     character(len=path_len) :: directory
     logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report, coarse_ooc
-    namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping, cluster
+    namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping, cluster, metis_block
     namelist /material/ young, poisson, variation, contrast, seed
     namelist /load/ top_pressure
     namelist /boundary/ top_dirichlet, top_displacement, symmetry_x0, symmetry_y0
@@ -512,6 +516,7 @@ contains
       nsub = p%mesh%nsub; nel = p%mesh%nel; lengths = p%mesh%lengths
       distortion = p%mesh%distortion; distortion_seed = p%mesh%distortion_seed
       decomposition = p%mesh%decomposition; mapping = p%mesh%mapping; cluster = p%mesh%cluster
+      metis_block = p%mesh%metis_block
       if (reading) read (group_text, nml=mesh, iostat=status, iomsg=msg)
       if (.not. reading) write (written, nml=mesh, delim='quote', iostat=status, iomsg=msg)
     case ('material')
@@ -564,7 +569,7 @@ contains
     select case (name)
     case ('mesh')
       p%mesh = mesh_params_t(nsub, nel, lengths, distortion, distortion_seed, &
-                             lower(decomposition), lower(mapping), cluster)
+                             lower(decomposition), lower(mapping), cluster, metis_block)
     case ('material')
       p%material = material_params_t(young, poisson, lower(variation), contrast, seed)
     case ('load')
@@ -610,6 +615,8 @@ contains
       if (.not. one_of(m%mapping, [character(len=8) :: 'block', 'metis'])) &
         call fail('mesh', 'mapping', "must be 'block' or 'metis'", m%mapping)
       if (any(m%cluster < 1)) call fail('mesh', 'cluster', 'each entry must be >= 1', ints(m%cluster))
+      if (m%metis_block < 0) call fail('mesh', 'metis_block', &
+        'must be 0 (automatic) or a block edge b >= 1 in elements', ints([m%metis_block]))
       if (status == 0) then     ! (no short-circuit in Fortran: mod only with cluster >= 1)
         if (any(mod(m%nsub, m%cluster) /= 0)) &
           call fail('mesh', 'cluster', 'must divide nsub in every direction (nsub = '//ints(m%nsub)//')', &

@@ -1,26 +1,34 @@
 !> Decomposition of the global box mesh into subdomains and the map of
 !> subdomains to MPI ranks. Arrays over subdomains (subdomain_rank, element
-!> counts, the subdomain graph) are replicated on every rank; nothing of the
-!> size of the global mesh is kept after the set-up.
+!> counts, the subdomain graph) and, for METIS, over the blocks of the coarse
+!> block grid are replicated on every rank; no array on any rank is sized by
+!> the global element or node count.
 !>
 !> 'box': box subdomains (I,J,K) of nel elements, id 1 + I + Nx*(J + Ny*K).
 !> Nothing of the size of the global mesh is stored: the subdomain of an
 !> element, the elements of a subdomain, the subdomains holding a node and the
 !> subdomain graph follow from index arithmetic (arrays of the number of
 !> subdomains only: subdomain_rank).
-!> 'metis': the global mesh cut into product(nsub) parts by METIS_PartMeshDual
-!> (parts share faces: ncommon = 4) on rank 0. A part that is not
+!> 'metis': a partition of the coarse block grid. The elements are grouped
+!> into blocks of b x b x b elements (the last block in a direction may be
+!> thinner), block (I,J,K) = element (i,j,k) / b, id 1 + I + NBx*(J + NBy*K).
+!> b is `&mesh metis_block`, or with 0 (automatic) the smallest b >= 1 that
+!> gives at most max_blocks_per_part blocks per requested part (so between
+!> about max_blocks_per_part/8 and max_blocks_per_part; b = 1, the dual graph
+!> of the elements by faces, whenever the mesh has no more elements than
+!> that). Rank 0 cuts the block graph (face neighbours, vertex weights =
+!> elements per block) into product(nsub) parts by METIS_PartGraphKway and
+!> broadcasts the part of every block. On every rank, a part that is not
 !> face-connected is split into its face-connected components, each one a
 !> subdomain; empty parts are dropped. Ids are 1..N ordered by (METIS part,
-!> smallest element gid of the component).
-!> The partition is made on rank 0 from the whole mesh (METIS's dual graph,
-!> the part of every element: arrays of the global element count, on rank 0
-!> during build_decomposition only). Rank 0 then sends every rank the
-!> elements it needs and their subdomains: the elements of its subdomains and
-!> every element sharing a node with them (`known_gids`, `known_subdomain`), so
-!> that node_subdomain_list answers for every node of its subdomains; the
-!> element lists of its own subdomains follow. The subdomain graph and the
-!> element count of every subdomain are broadcast (arrays over subdomains).
+!> smallest block id of the component). Every rank keeps block_subdomain
+!> (one entry per block: at most max_blocks_per_part x product(nsub) in the
+!> automatic case) and finds by index arithmetic the subdomain of any element
+!> (element -> block -> subdomain), hence the subdomains holding any node,
+!> and the element lists of its own subdomains. The element counts per
+!> subdomain and the subdomain graph (subdomains sharing a node = blocks
+!> within one block of each other in every direction) follow from the
+!> blocks, on every rank. Nothing is sent but the block parts.
 !> Mapping 'block': contiguous blocks of ids, sizes differing by at most one;
 !> 'metis': METIS_PartGraphKway on the subdomain adjacency graph (subdomains
 !> sharing a node), vertex weights = element counts; a rank METIS leaves empty
@@ -30,14 +38,18 @@ module decomposition
   use errors, only: collective_error, fatal_error, exit_input_error
   use logger, only: log_message
   use params, only: params_t
-  use metis_wrapper, only: metis_part_mesh_dual, metis_part_graph_kway
+  use metis_wrapper, only: metis_part_graph_kway
   use sorting, only: sort_ints, append_unmarked
   use box_mesh, only: box_mesh_t, box_mesh_init
-  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast, MPI_Scatter, MPI_Scatterv, MPI_INTEGER
+  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast
   implicit none
   private
 
-  public :: build_decomposition, split_into_components, block_mapping, subdomain_graph
+  public :: build_decomposition, split_into_components, block_mapping, subdomain_graph, automatic_metis_block
+
+  !> 'metis', metis_block = 0: the block size b is the smallest giving at most
+  !> this many blocks per requested part
+  integer(ip), parameter, public :: max_blocks_per_part = 64
 
   !> The decomposition, replicated on every rank of `comm`.
   type, public :: decomposition_t
@@ -45,10 +57,11 @@ module decomposition
     type(MPI_Comm) :: comm                              !< the ranks that share the subdomains
     character(len=name_len) :: method = 'box'           !< 'box' | 'metis'
     integer(ip) :: nsubdomains = 0, nranks = 1, rank = 0
-    !> 'metis' only: the elements this rank knows (its subdomains' elements
-    !> and every element sharing a node with them), ascending gids, and their
-    !> subdomain ids (box: subdomain_of_element by index arithmetic)
-    integer(ip), allocatable :: known_gids(:), known_subdomain(:)
+    !> 'metis' only: block size b (elements per block edge), blocks per
+    !> direction, and the subdomain of every block (box: subdomain_of_element
+    !> by index arithmetic)
+    integer(ip) :: block = 0, nblock(3) = 0
+    integer(ip), allocatable :: block_subdomain(:)
     !> 'metis' only: element count of every subdomain id, and the subdomain
     !> graph (CSR, as subdomain_graph returns it)
     integer(ip), allocatable :: subdomain_nelem(:), graph_xadj(:), graph_adjncy(:)
@@ -76,8 +89,7 @@ contains
     type(MPI_Comm), intent(in) :: comm
     type(decomposition_t), intent(out) :: dec
     integer :: ierr, rank, nranks
-    integer(ip) :: ne, s, nadj
-    integer(ip), allocatable :: esub(:)
+    integer(ip) :: s
     character(len=256) :: msg
 
     call MPI_Comm_rank(comm, rank, ierr)
@@ -88,28 +100,14 @@ contains
     dec%method = p%mesh%decomposition
     call box_mesh_init(dec%mesh, p%mesh%nsub, p%mesh%nel, p%mesh%lengths, p%mesh%distortion, &
                        p%mesh%distortion_seed)
-    ne = dec%mesh%num_elements()
 
     select case (trim(p%mesh%decomposition))
     case ('box')
       ! index arithmetic only: no array of the size of the mesh
       dec%nsubdomains = product(p%mesh%nsub)
     case ('metis')
-      ! rank 0: the partition of the whole mesh, the element counts and the graph
-      if (rank == 0) then
-        allocate (esub(ne))
-        call metis_partition(dec%mesh, esub, dec%nsubdomains)
-        call element_graph(dec%mesh, esub, dec%nsubdomains, dec%subdomain_nelem, dec%graph_xadj, &
-                           dec%graph_adjncy)
-        nadj = size(dec%graph_adjncy, kind=ip)
-      end if
-      call MPI_Bcast(dec%nsubdomains, 1, MPI_INT_IP, 0, comm, ierr)
-      call MPI_Bcast(nadj, 1, MPI_INT_IP, 0, comm, ierr)
-      if (rank /= 0) allocate (dec%subdomain_nelem(dec%nsubdomains), dec%graph_xadj(dec%nsubdomains + 1), &
-                               dec%graph_adjncy(nadj))
-      call MPI_Bcast(dec%subdomain_nelem, dec%nsubdomains, MPI_INT_IP, 0, comm, ierr)
-      call MPI_Bcast(dec%graph_xadj, dec%nsubdomains + 1, MPI_INT_IP, 0, comm, ierr)
-      call MPI_Bcast(dec%graph_adjncy, nadj, MPI_INT_IP, 0, comm, ierr)
+      ! arrays over the blocks and the subdomains only
+      call metis_block_partition(dec, p%mesh%metis_block)
     case default
       call collective_error("group &mesh, variable decomposition: must be 'box' or 'metis' (got "// &
                             trim(p%mesh%decomposition)//')', comm, exit_input_error)
@@ -135,93 +133,190 @@ contains
                             trim(p%mesh%mapping)//')', comm, exit_input_error)
     end select
     dec%local_subdomains = pack([(s, s=1, dec%nsubdomains)], dec%subdomain_rank == rank)
-    if (.not. dec%is_box()) call distribute_elements(dec, esub)
+    if (.not. dec%is_box()) call local_element_lists(dec)
   end subroutine build_decomposition
 
-  !> Rank 0 sends every rank the elements it needs (see the module
-  !> documentation) with their subdomains, then frees the global `esub`; each
-  !> rank builds the element lists of its own subdomains. Collective.
-  subroutine distribute_elements(dec, esub)
-    type(decomposition_t), intent(inout) :: dec
-    integer(ip), allocatable, intent(inout) :: esub(:)   !< rank 0: subdomain of every element
-    integer, allocatable :: counts(:), displs(:), next(:)
-    integer(ip), allocatable :: sendbuf(:, :), recvbuf(:, :)
-    integer(ip) :: ne, e, k, nr, ranks(27), ls, s
-    integer :: mine, ierr, r
+  !> The block size for `&mesh metis_block = 0`: the smallest b >= 1 such that
+  !> the grid of ng(1) x ng(2) x ng(3) elements has at most
+  !> max_blocks_per_part * nparts blocks of b^3 elements.
+  pure integer(ip) function automatic_metis_block(ng, nparts) result(b)
+    integer(ip), intent(in) :: ng(3), nparts
+    b = 1
+    do while (product((ng + b - 1)/b) > max_blocks_per_part*nparts)
+      b = b + 1
+    end do
+  end function automatic_metis_block
 
-    allocate (counts(0:dec%nranks - 1), displs(0:dec%nranks - 1))
+  !> Block (0-based (I,J,K)) of element `gid` and its id in the block grid.
+  pure integer(ip) function block_of_element(dec, gid) result(id)
+    type(decomposition_t), intent(in) :: dec
+    integer(ip), intent(in) :: gid
+    integer(ip) :: bijk(3)
+    bijk = dec%mesh%element_ijk(gid)/dec%block
+    id = 1 + bijk(1) + dec%nblock(1)*(bijk(2) + dec%nblock(2)*bijk(3))
+  end function block_of_element
+
+  !> Elements in block (0-based) bijk: b^3, fewer at the high ends of the grid.
+  pure integer(ip) function block_weight(dec, bijk)
+    type(decomposition_t), intent(in) :: dec
+    integer(ip), intent(in) :: bijk(3)
+    block_weight = product(min(dec%block, dec%mesh%ng - bijk*dec%block))
+  end function block_weight
+
+  !> 'metis': the block size, the METIS parts of the block grid (rank 0,
+  !> broadcast), their face-connected components as subdomains, the element
+  !> count of every subdomain and the subdomain graph (every rank). Collective.
+  subroutine metis_block_partition(dec, metis_block)
+    type(decomposition_t), intent(inout) :: dec
+    integer(ip), intent(in) :: metis_block
+    integer(ip), allocatable :: xadj(:), adjncy(:), part(:), ptr(:), list(:), next(:), marker(:)
+    integer(ip), allocatable, target :: weights(:)
+    integer(ip) :: nparts, nb, k, d, c, bijk(3), nijk(3), nsplit, ndropped, n, s, t, m, first, nadj, &
+                   di, dj, dk
+    integer :: ierr
+    character(len=256) :: msg
+
+    nparts = product(dec%mesh%nsub)
+    if (metis_block == 0) then
+      dec%block = automatic_metis_block(dec%mesh%ng, nparts)
+    else
+      dec%block = metis_block
+    end if
+    dec%nblock = (dec%mesh%ng + dec%block - 1)/dec%block
+    nb = product(dec%nblock)
+    if (nb < nparts) then
+      write (msg, '(a,i0,a,i0,a,i0,a)') 'group &mesh, variable metis_block: blocks of ', dec%block, &
+        ' elements per edge give ', nb, ' blocks, fewer than the ', nparts, &
+        ' parts (product(nsub)); use 0 (automatic) or a smaller b >= 1'
+      call collective_error(msg, dec%comm, exit_input_error)
+    end if
+    allocate (part(nb))
     if (dec%rank == 0) then
-      ne = size(esub, kind=ip)
-      counts = 0
-      do e = 1, ne
-        call ranks_needing(e, ranks, nr)
-        counts(ranks(1:nr)) = counts(ranks(1:nr)) + 1
+      ! the block graph: face neighbours, ascending ids; weights = elements per block
+      allocate (xadj(nb + 1), adjncy(max(1_ip, 6*nb)), weights(nb))
+      nadj = 0
+      xadj(1) = 1
+      do k = 1, nb
+        bijk = box_ijk(dec%nblock, k)
+        weights(k) = block_weight(dec, bijk)
+        do d = 3, 1, -1
+          do c = -1, 1, 2
+            nijk = bijk
+            nijk(d) = nijk(d) + c
+            if (nijk(d) < 0 .or. nijk(d) >= dec%nblock(d)) cycle
+            nadj = nadj + 1
+            adjncy(nadj) = 1 + nijk(1) + dec%nblock(1)*(nijk(2) + dec%nblock(2)*nijk(3))
+          end do
+        end do
+        call sort_ints(adjncy(xadj(k):nadj))
+        xadj(k + 1) = nadj + 1
       end do
-      displs(0) = 0
-      do r = 1, dec%nranks - 1
-        displs(r) = displs(r - 1) + counts(r - 1)
-      end do
-      allocate (sendbuf(2, sum(counts)))
-      next = displs
-      do e = 1, ne
-        call ranks_needing(e, ranks, nr)
-        do k = 1, nr
-          next(ranks(k)) = next(ranks(k)) + 1
-          sendbuf(:, next(ranks(k))) = [e, esub(e)]
+      call metis_part_graph_kway(nb, xadj, adjncy, nparts, part, weights)
+      deallocate (xadj, adjncy, weights)
+    end if
+    call MPI_Bcast(part, nb, MPI_INT_IP, 0, dec%comm, ierr)
+    allocate (dec%block_subdomain(nb))
+    call split_into_components(dec%nblock, part, nparts, dec%block_subdomain, dec%nsubdomains, nsplit, ndropped)
+    deallocate (part)
+    if (dec%rank == 0) then
+      write (msg, '(a,i0,a,3(1x,i0),a,i0,a)') 'decomposition: METIS on blocks of ', dec%block, &
+        '^3 elements (block grid', dec%nblock, ', ', nb, ' blocks)'
+      call log_message(msg)
+      if (nsplit > 0) then
+        write (msg, '(a,i0,a,i0,a)') 'decomposition: ', nsplit, ' METIS part(s) not face-connected, '// &
+          'split into their connected components (', dec%nsubdomains, ' subdomains)'
+        call log_message(msg)
+      end if
+      if (ndropped > 0) then
+        write (msg, '(a,i0,a)') 'decomposition: ', ndropped, ' empty METIS part(s) dropped'
+        call log_message(msg)
+      end if
+    end if
+
+    ! element counts and the blocks of every subdomain
+    n = dec%nsubdomains
+    allocate (dec%subdomain_nelem(n), ptr(n + 1), list(nb), next(n))
+    dec%subdomain_nelem = 0
+    ptr = 0
+    do k = 1, nb
+      s = dec%block_subdomain(k)
+      dec%subdomain_nelem(s) = dec%subdomain_nelem(s) + block_weight(dec, box_ijk(dec%nblock, k))
+      ptr(s + 1) = ptr(s + 1) + 1
+    end do
+    ptr(1) = 1
+    do s = 1, n
+      ptr(s + 1) = ptr(s + 1) + ptr(s)
+    end do
+    next = ptr(1:n)
+    do k = 1, nb
+      s = dec%block_subdomain(k)
+      list(next(s)) = k
+      next(s) = next(s) + 1
+    end do
+    ! the subdomain graph: elements of s and t share a node iff some blocks of
+    ! s and t are within one block of each other in every direction
+    allocate (dec%graph_xadj(n + 1), marker(n), dec%graph_adjncy(max(16_ip, 8*n)))
+    marker = 0
+    nadj = 0
+    dec%graph_xadj(1) = 1
+    do s = 1, n
+      first = nadj + 1
+      do m = ptr(s), ptr(s + 1) - 1
+        bijk = box_ijk(dec%nblock, list(m))
+        do dk = -1, 1
+          do dj = -1, 1
+            do di = -1, 1
+              nijk = bijk + [di, dj, dk]
+              if (any(nijk < 0) .or. any(nijk >= dec%nblock)) cycle
+              t = dec%block_subdomain(1 + nijk(1) + dec%nblock(1)*(nijk(2) + dec%nblock(2)*nijk(3)))
+              if (t /= s) call append_unmarked(dec%graph_adjncy, nadj, t, marker, s)
+            end do
+          end do
         end do
       end do
-      deallocate (esub)
-    else
-      allocate (sendbuf(2, 1))
-    end if
-    call MPI_Scatter(counts, 1, MPI_INTEGER, mine, 1, MPI_INTEGER, 0, dec%comm, ierr)
-    allocate (recvbuf(2, mine))
-    call MPI_Scatterv(sendbuf, 2*counts, 2*displs, MPI_INT_IP, recvbuf, 2*mine, MPI_INT_IP, 0, dec%comm, ierr)
-    deallocate (sendbuf)
-    dec%known_gids = recvbuf(1, :)            ! ascending: rank 0 sent them in gid order
-    dec%known_subdomain = recvbuf(2, :)
-    deallocate (recvbuf)
+      call sort_ints(dec%graph_adjncy(first:nadj))
+      dec%graph_xadj(s + 1) = nadj + 1
+    end do
+    dec%graph_adjncy = dec%graph_adjncy(1:nadj)
+  end subroutine metis_block_partition
 
-    ! the element lists of the local subdomains
-    associate (nl => size(dec%local_subdomains))
-      allocate (dec%subdomain_element_ptr(nl + 1))
-      dec%subdomain_element_ptr(1) = 1
-      do ls = 1, nl
-        dec%subdomain_element_ptr(ls + 1) = dec%subdomain_element_ptr(ls) + &
-                                            dec%subdomain_nelem(dec%local_subdomains(ls))
+  !> The element lists of this rank's subdomains (ascending gids), from the
+  !> blocks of those subdomains. Local: no communication.
+  subroutine local_element_lists(dec)
+    type(decomposition_t), intent(inout) :: dec
+    integer(ip), allocatable :: next(:)
+    integer(ip) :: k, ls, nl, s, bijk(3), lo(3), hi(3), i, j, kk
+    nl = size(dec%local_subdomains, kind=ip)
+    allocate (dec%subdomain_element_ptr(nl + 1), next(nl))
+    dec%subdomain_element_ptr(1) = 1
+    do ls = 1, nl
+      dec%subdomain_element_ptr(ls + 1) = dec%subdomain_element_ptr(ls) + &
+                                          dec%subdomain_nelem(dec%local_subdomains(ls))
+    end do
+    allocate (dec%subdomain_elements(dec%subdomain_element_ptr(nl + 1) - 1))
+    next = dec%subdomain_element_ptr(1:nl)
+    do k = 1, size(dec%block_subdomain, kind=ip)
+      s = dec%block_subdomain(k)
+      if (dec%subdomain_rank(s) /= dec%rank) cycle
+      ls = local_position(dec, s)
+      bijk = box_ijk(dec%nblock, k)
+      lo = bijk*dec%block
+      hi = min(lo + dec%block, dec%mesh%ng) - 1
+      do kk = lo(3), hi(3)
+        do j = lo(2), hi(2)
+          do i = lo(1), hi(1)
+            dec%subdomain_elements(next(ls)) = dec%mesh%element_gid([i, j, kk])
+            next(ls) = next(ls) + 1
+          end do
+        end do
       end do
-      allocate (dec%subdomain_elements(dec%subdomain_element_ptr(nl + 1) - 1))
-      if (allocated(next)) deallocate (next)
-      allocate (next(nl))
-      next = dec%subdomain_element_ptr(1:nl)
-      do k = 1, size(dec%known_gids)
-        s = dec%known_subdomain(k)
-        if (dec%subdomain_rank(s) /= dec%rank) cycle
-        ls = local_position(dec, s)
-        dec%subdomain_elements(next(ls)) = dec%known_gids(k)
-        next(ls) = next(ls) + 1
-      end do
-      if (any(next /= dec%subdomain_element_ptr(2:nl + 1))) &
-        call fatal_error('decomposition: the elements received do not match the element counts')
-    end associate
-
-  contains
-
-    !> The distinct ranks owning element e or an element sharing a node with it.
-    subroutine ranks_needing(e, ranks, nr)
-      integer(ip), intent(in) :: e
-      integer(ip), intent(out) :: ranks(27), nr
-      integer(ip) :: near(27), nnear, m, r
-      call dec%mesh%elements_near(dec%mesh%element_ijk(e), -1_ip, 1_ip, near, nnear)
-      nr = 0
-      do m = 1, nnear
-        r = dec%subdomain_rank(esub(near(m)))
-        if (any(ranks(1:nr) == r)) cycle
-        nr = nr + 1
-        ranks(nr) = r
-      end do
-    end subroutine ranks_needing
-  end subroutine distribute_elements
+    end do
+    if (any(next /= dec%subdomain_element_ptr(2:nl + 1))) &
+      call fatal_error('decomposition: the block elements do not match the element counts')
+    do ls = 1, nl
+      call sort_ints(dec%subdomain_elements(dec%subdomain_element_ptr(ls):dec%subdomain_element_ptr(ls + 1) - 1))
+    end do
+  end subroutine local_element_lists
 
   !> Position of subdomain `id` in local_subdomains (binary search), 0 when
   !> this rank does not own it.
@@ -251,50 +346,21 @@ contains
     end do
   end function find_sorted
 
-  !> METIS parts of the whole mesh, split into face-connected subdomains (rank 0).
-  subroutine metis_partition(mesh, element_subdomain, nsubdomains)
-    type(box_mesh_t), intent(in) :: mesh
-    integer(ip), intent(out) :: element_subdomain(:)
-    integer(ip), intent(out) :: nsubdomains
-    integer(ip), allocatable :: eptr(:), eind(:), part(:)
-    integer(ip) :: ne, e, nparts, nsplit, ndropped
-    character(len=200) :: msg
-
-    ne = mesh%num_elements()
-    nparts = product(mesh%nsub)
-    allocate (eptr(ne + 1), eind(8*ne), part(ne))
-    do e = 1, ne
-      eptr(e) = 8*(e - 1) + 1
-      eind(8*(e - 1) + 1:8*e) = mesh%element_nodes(e)
-    end do
-    eptr(ne + 1) = 8*ne + 1
-    call metis_part_mesh_dual(ne, mesh%num_nodes(), eptr, eind, 4_ip, nparts, part)
-    deallocate (eptr, eind)
-    call split_into_components(mesh, part, nparts, element_subdomain, nsubdomains, nsplit, ndropped)
-    if (nsplit > 0) then
-      write (msg, '(a,i0,a,i0,a)') 'decomposition: ', nsplit, ' METIS part(s) not face-connected, '// &
-        'split into their connected components (', nsubdomains, ' subdomains)'
-      call log_message(msg)
-    end if
-    if (ndropped > 0) then
-      write (msg, '(a,i0,a)') 'decomposition: ', ndropped, ' empty METIS part(s) dropped'
-      call log_message(msg)
-    end if
-  end subroutine metis_partition
-
-  !> Turn a partition part(e) in 1..nparts of the elements into subdomains:
+  !> Turn a partition part(c) in 1..nparts of the cells of a grid of
+  !> dims(1) x dims(2) x dims(3) cells (cell id 1 + i + dims(1)*(j + dims(2)*k),
+  !> 0-based i,j,k: the elements of the mesh, or the blocks) into subdomains:
   !> each face-connected component of a part becomes one subdomain, ids 1..N
-  !> in the order (part, smallest element gid); empty parts give none.
+  !> in the order (part, smallest cell id); empty parts give none.
   !> nsplit: parts with more than one component; ndropped: empty parts.
-  subroutine split_into_components(mesh, part, nparts, element_subdomain, nsubdomains, nsplit, ndropped)
-    type(box_mesh_t), intent(in) :: mesh
+  subroutine split_into_components(dims, part, nparts, cell_subdomain, nsubdomains, nsplit, ndropped)
+    integer(ip), intent(in) :: dims(3)
     integer(ip), intent(in) :: part(:), nparts
-    integer(ip), intent(out) :: element_subdomain(:)
+    integer(ip), intent(out) :: cell_subdomain(:)
     integer(ip), intent(out) :: nsubdomains, nsplit, ndropped
     integer(ip), allocatable :: label(:), queue(:), comp_part(:), ncomp_of(:), offset(:), new_id(:)
     integer(ip) :: ne, e, x, y, head, tail, ncomp, d, c, ijk(3), nijk(3)
 
-    ne = mesh%num_elements()
+    ne = product(dims)
     if (any(part(1:ne) < 1) .or. any(part(1:ne) > nparts)) &
       call fatal_error('split_into_components: part out of range')
     allocate (label(ne), queue(ne), comp_part(ne))
@@ -311,13 +377,13 @@ contains
       do while (head <= tail)
         x = queue(head)
         head = head + 1
-        ijk = mesh%element_ijk(x)
+        ijk = box_ijk(dims, x)
         do d = 1, 3
           do c = -1, 1, 2
             nijk = ijk
             nijk(d) = nijk(d) + c
-            if (nijk(d) < 0 .or. nijk(d) >= mesh%ng(d)) cycle
-            y = mesh%element_gid(nijk)
+            if (nijk(d) < 0 .or. nijk(d) >= dims(d)) cycle
+            y = 1 + nijk(1) + dims(1)*(nijk(2) + dims(2)*nijk(3))
             if (label(y) /= 0 .or. part(y) /= part(x)) cycle
             label(y) = ncomp
             tail = tail + 1
@@ -326,7 +392,7 @@ contains
         end do
       end do
     end do
-    ! components in discovery order = ascending smallest element; stable by part
+    ! components in discovery order = ascending smallest cell; stable by part
     allocate (ncomp_of(nparts), offset(nparts), new_id(ncomp))
     ncomp_of = 0
     do c = 1, ncomp
@@ -341,7 +407,7 @@ contains
       new_id(c) = offset(comp_part(c))
     end do
     do e = 1, ne
-      element_subdomain(e) = new_id(label(e))
+      cell_subdomain(e) = new_id(label(e))
     end do
     nsubdomains = ncomp
     nsplit = count(ncomp_of > 1)
@@ -364,49 +430,6 @@ contains
       first = first + nblock
     end do
   end function block_mapping
-
-  !> Element counts and the subdomain graph (s, t neighbours when they share
-  !> a node; CSR, neighbours ascending) from the subdomain of every element
-  !> (rank 0, at set-up).
-  subroutine element_graph(mesh, esub, n, nelem, xadj, adjncy)
-    type(box_mesh_t), intent(in) :: mesh
-    integer(ip), intent(in) :: esub(:), n
-    integer(ip), allocatable, intent(out) :: nelem(:), xadj(:), adjncy(:)
-    integer(ip), allocatable :: ptr(:), list(:), next(:), marker(:)
-    integer(ip) :: ne, e, s, t, k, m, near(27), nnear, nadj, first
-    ne = size(esub, kind=ip)
-    allocate (nelem(n), ptr(n + 1), list(ne), next(n))
-    nelem = 0
-    do e = 1, ne
-      nelem(esub(e)) = nelem(esub(e)) + 1
-    end do
-    ptr(1) = 1
-    do s = 1, n
-      ptr(s + 1) = ptr(s) + nelem(s)
-    end do
-    next = ptr(1:n)
-    do e = 1, ne
-      list(next(esub(e))) = e
-      next(esub(e)) = next(esub(e)) + 1
-    end do
-    allocate (xadj(n + 1), marker(n), adjncy(max(16, 8*n)))
-    marker = 0
-    nadj = 0
-    xadj(1) = 1
-    do s = 1, n
-      first = nadj + 1
-      do k = ptr(s), ptr(s + 1) - 1
-        call mesh%elements_near(mesh%element_ijk(list(k)), -1_ip, 1_ip, near, nnear)
-        do m = 1, nnear
-          t = esub(near(m))
-          if (t /= s) call append_unmarked(adjncy, nadj, t, marker, s)
-        end do
-      end do
-      call sort_ints(adjncy(first:nadj))
-      xadj(s + 1) = nadj + 1
-    end do
-    adjncy = adjncy(1:nadj)
-  end subroutine element_graph
 
   !> Subdomain adjacency graph (1-based CSR, no self loops, neighbours
   !> ascending): s and t are neighbours when they share at least one node.
@@ -523,7 +546,6 @@ contains
     n = 0
     do k = 1, nnear
       s = this%subdomain_of_element(near(k))
-      if (s == 0) cycle                  ! unknown element (METIS, not near this rank's subdomains)
       ! insert s into the sorted ids(1:n) unless present
       pos = n + 1
       do m = 1, n
@@ -558,18 +580,15 @@ contains
     is_box = trim(this%method) == 'box'
   end function is_box
 
-  !> Id of the subdomain holding element `gid`. METIS: known for the elements
-  !> of this rank's subdomains and those sharing a node with them, else 0.
+  !> Id of the subdomain holding element `gid`, by index arithmetic (METIS:
+  !> element -> block -> block_subdomain), for every element on every rank.
   pure integer(ip) function subdomain_of_element(this, gid)
     class(decomposition_t), intent(in) :: this
     integer(ip), intent(in) :: gid
-    integer(ip) :: k
     if (this%is_box()) then
       subdomain_of_element = this%mesh%box_subdomain(gid)
     else
-      k = find_sorted(this%known_gids, gid)
-      subdomain_of_element = 0
-      if (k > 0) subdomain_of_element = this%known_subdomain(k)
+      subdomain_of_element = this%block_subdomain(block_of_element(this, gid))
     end if
   end function subdomain_of_element
 
