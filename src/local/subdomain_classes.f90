@@ -36,6 +36,8 @@ module subdomain_classes
   !> At most this many classes are tried per subdomain (a rank with more
   !> distinct subdomains gets one class per subdomain without more comparisons).
   integer(ip), parameter :: max_classes = 64
+  !> Sharing is used when nsub >= min_mean_members * nclass (see `shared`).
+  integer(ip), parameter, public :: min_mean_members = 2
 
   type, public :: subdomain_classes_t
     integer(ip) :: nclass = 0
@@ -106,11 +108,17 @@ contains
     end do
   end subroutine find_classes
 
-  !> True when some class has more than one member.
+  !> True when sharing pays: the classes hold at least `min_mean_members`
+  !> subdomains on average. A rank whose subdomains are almost all different
+  !> (METIS subdomains made of blocks, of which a few are translates of each
+  !> other: 250 classes for 256 subdomains measured) keeps the per-subdomain
+  !> paths, whose cost models (`f_action = 'auto'`) know the size of each
+  !> subdomain's operator; the shared paths store one operator per class on
+  !> the union of its dofs touched by B and would hold one per subdomain.
   logical function shared(this)
     class(subdomain_classes_t), intent(in) :: this
     shared = .false.
-    if (allocated(this%class_of)) shared = this%nclass < size(this%class_of, kind=ip)
+    if (allocated(this%class_of)) shared = min_mean_members*this%nclass <= size(this%class_of, kind=ip)
   end function shared
 
   !> share_rounding_factor * eps * (max|x| / h_min + 1) of `sub` (see the module).
