@@ -33,7 +33,8 @@ export OMPI_MCA_rmaps_base_oversubscribe=1
 for input in "${inputs[@]}"; do
   for rep in $(seq 1 "$reps"); do
     for bin in "${bins[@]}"; do
-      tag=$(basename "$(dirname "$(dirname "$bin")")")_$(basename "$bin")
+      tag=$(basename "$bin")    # a copy such as feticontact_<commit>, or <build dir>_feticontact
+      [ "$tag" = feticontact ] && tag=$(basename "$(dirname "$(dirname "$bin")")")_$tag
       d="$dir/${tag}_$(basename "$input" .nml)_$rep"; rm -rf "$d"; mkdir -p "$d"
       ( cd "$d" && /usr/bin/time -f "%e" -o time.txt mpirun -np "$ranks" "$bin" "$input" > log.txt 2>&1 ) || true
       /usr/bin/python3 - "$d" "$bin" "$input" <<'PY'

@@ -103,9 +103,10 @@ contains
       end do
       deallocate (cmap)
     end do
-    allocate (this%mat(this%coff(classes%nclass + 1)), this%xw(wmax), this%yw(wmax))
+    ! the dense M_c are allocated by the first set_matrix: a sparse operator
+    ! (set_sparse) never holds them, not even for a moment
+    allocate (this%xw(wmax), this%yw(wmax))
     allocate (this%wloc(max(1, this%n_local_rows)), this%wloc2(max(1, this%n_local_rows)))
-    this%mat = 0
   end subroutine init
 
   !> U_c: the union over the members of class `c` of the dofs B^s touches
@@ -142,20 +143,22 @@ contains
     integer(ip) :: n
     n = this%cn(c)
     if (size(m, 1) /= n .or. size(m, 2) /= n) call fatal_error('class_operator%set_matrix: n_c x n_c expected')
+    if (this%sparse) call fatal_error('class_operator%set_matrix: the classes are set sparse')
+    if (.not. allocated(this%mat)) allocate (this%mat(this%coff(this%classes%nclass + 1)))
     this%mat(this%coff(c) + 1:this%coff(c + 1)) = reshape(m, [int(n, i8)*n])
   end subroutine set_matrix
 
   !> M_c = `m` (n_c x n_c CSR, symmetric, both triangles); then every class
-  !> must be set this way (the dense storage is released).
+  !> must be set this way.
   subroutine set_sparse(this, c, m)
     class(class_operator_t), intent(inout) :: this
     integer(ip), intent(in) :: c
     type(csr_t), intent(in) :: m
     if (m%nrows /= this%cn(c) .or. m%ncols /= this%cn(c)) call fatal_error('class_operator%set_sparse: n_c x n_c expected')
+    if (allocated(this%mat)) call fatal_error('class_operator%set_sparse: the classes are set dense')
     if (.not. allocated(this%smat)) allocate (this%smat(this%classes%nclass))
     this%smat(c) = m
     this%sparse = .true.
-    if (allocated(this%mat)) deallocate (this%mat)
   end subroutine set_sparse
 
   !> y = sum_s a_s B^_s M_c(s) B^_s^T x (dual vectors, owned rows). Collective
