@@ -41,7 +41,8 @@ module dual_problem
   use qp_problem, only: qp_problem_t, no_lower_bound
   use feti_operators, only: feti_t, local_field_t
   use subdomain, only: subdomain_t
-  use reconstruction, only: alpha_new
+  use reconstruction, only: alpha_new, active_coarse_solve
+  use coarse_problem, only: coarse_problem_t
   use dual_preconditioner, only: dual_preconditioner_t
   use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX
   implicit none
@@ -65,6 +66,10 @@ module dual_problem
     logical :: use_prec = .false.
     real(dp) :: prec_q_weight = 1              !< sigma: M_A^{-1} A = sigma on Im Q
     real(dp), allocatable, private :: wp(:), wq(:), wm(:)
+    !> G_F G_F^T of SMALBE's face solve (F: equality rows and free contact
+    !> rows), assembled and factorized as the standard reconstruction does
+    type(coarse_problem_t), private :: face_cp
+    logical, private :: face_ready = .false.
   contains
     procedure :: init
     procedure :: prepare
@@ -84,6 +89,10 @@ module dual_problem
     procedure :: has_preconditioner
     procedure :: precondition
     procedure :: preconditioner_name
+    procedure :: has_face_solver
+    procedure :: face_init
+    procedure :: face_coefficient
+    procedure :: face_free
     procedure :: hessian_norm
     procedure :: alpha_bar
     procedure :: free
@@ -215,6 +224,39 @@ contains
     call self%apply_projector(self%wm, self%wp, .false.)
     z(1:self%n) = self%scale*self%wp + (self%prec_q_weight/self%penalty())*self%wq
   end subroutine precondition
+
+  !> The face solver of SMALBE's polish step (qp_problem): in hat form the
+  !> factor L cancels, C_F^T (C_F C_F^T)^{-1} C = G_F^T (G_F G_F^T)^{-1} G,
+  !> so c = (G_F G_F^T)^{-1} G y and eq_apply_t(c) = G^T c.
+  logical function has_face_solver(self)
+    class(dual_problem_t), intent(in) :: self
+    has_face_solver = associated(self%op)
+  end function has_face_solver
+
+  !> Assemble and factorize G_F G_F^T over the rows in `free` (the equality
+  !> rows are always free: their lower bound is no_lower_bound). Collective.
+  subroutine face_init(self, free)
+    class(dual_problem_t), intent(inout) :: self
+    logical, intent(in) :: free(:)
+    call self%face_free()
+    call self%op%init_active_coarse(self%face_cp, free)
+    self%face_ready = .true.
+  end subroutine face_init
+
+  !> c = (G_F G_F^T)^{-1} G y (local coarse blocks). Collective.
+  subroutine face_coefficient(self, y, c)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: y(:)
+    real(dp), intent(out) :: c(:)
+    if (.not. self%face_ready) call fatal_error('dual_problem: face_coefficient before face_init')
+    call active_coarse_solve(self%op, self%face_cp, y, c)
+  end subroutine face_coefficient
+
+  subroutine face_free(self)
+    class(dual_problem_t), intent(inout) :: self
+    if (self%face_ready) call self%face_cp%free()
+    self%face_ready = .false.
+  end subroutine face_free
 
   !> Extra set-up of an extension before b is formed (none here).
   subroutine prepare(self)
@@ -393,6 +435,7 @@ contains
     call self%prec%free()
     self%use_prec = .false.
     if (allocated(self%wp)) deallocate (self%wp, self%wq, self%wm)
+    call self%face_free()
     self%op => null()
   end subroutine free
 end module dual_problem

@@ -33,6 +33,7 @@ module dual_problem_orth
     procedure :: eq_residual
     procedure :: eq_apply_t
     procedure :: alpha_bar
+    procedure :: has_face_solver
     procedure :: free
   end type dual_problem_orth_t
 
@@ -90,6 +91,14 @@ contains
     real(dp), intent(out) :: alpha(:)
     call alpha_orthonormal(self%orth, g, self%unscaled_multiplier(mu_scaled), alpha)
   end subroutine alpha_bar
+
+  !> No face solver: the multiplier here is mu itself, not the hat form that
+  !> dual_problem%face_coefficient returns (SMALBE does not polish).
+  logical function has_face_solver(self)
+    class(dual_problem_orth_t), intent(in) :: self
+    has_face_solver = .false.
+    if (self%n < 0) has_face_solver = .true.   ! never: keeps self referenced
+  end function has_face_solver
 
   subroutine free(self)
     class(dual_problem_orth_t), intent(inout) :: self

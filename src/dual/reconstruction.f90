@@ -31,7 +31,8 @@ module reconstruction
   implicit none
   private
 
-  public :: dual_gradient, alpha_new, alpha_orthonormal, alpha_standard, active_contact_mask, coarse_vector_norm
+  public :: dual_gradient, active_coarse_solve, alpha_new, alpha_orthonormal, alpha_standard, active_contact_mask, &
+            coarse_vector_norm
 
   !> Seconds of the parts of the standard formula on this rank.
   type, public :: standard_cost_t
@@ -118,12 +119,12 @@ contains
     real(dp), intent(out) :: alpha_bar(:)
     type(standard_cost_t), intent(out) :: cost
     logical, allocatable :: mask(:)
-    real(dp), allocatable :: ga(:), gz(:)
+    real(dp), allocatable :: ga(:)
     type(coarse_problem_t) :: active_cp
     real(dp) :: t0
 
     call timer_start('rec standard')
-    allocate (mask(op%n_own()), ga(op%n_own()), gz(op%n_coarse()))
+    allocate (mask(op%n_own()), ga(op%n_own()))
     t0 = MPI_Wtime()
     call active_contact_mask(op, lambda, active_tol, mask, cost%active_rows)
     call op%init_active_coarse(active_cp, mask)
@@ -131,13 +132,26 @@ contains
     cost%assembly = MPI_Wtime() - t0 - cost%factorization
     t0 = MPI_Wtime()
     ga = merge(g, 0.0_dp, mask)
-    call op%apply_g(ga, gz)
-    call active_cp%solve(gz, alpha_bar)
+    call active_coarse_solve(op, active_cp, ga, alpha_bar)
     cost%solve = MPI_Wtime() - t0
     call active_cp%free()
     call timer_stop('rec standard')
     cost%total = cost%assembly + cost%factorization + cost%solve
   end subroutine alpha_standard
+
+  !> z = (G_A G_A^T)^{-1} G v with the matrix `cp` of init_active_coarse: the
+  !> standard formula's solve (v = g on A, 0 elsewhere), and SMALBE's face
+  !> projector (dual_problem%face_coefficient, A = the free rows). Collective.
+  subroutine active_coarse_solve(op, cp, v, z)
+    type(feti_t), intent(inout) :: op
+    type(coarse_problem_t), intent(inout) :: cp
+    real(dp), intent(in) :: v(:)
+    real(dp), intent(out) :: z(:)
+    real(dp), allocatable :: gz(:)
+    allocate (gz(op%n_coarse()))
+    call op%apply_g(v, gz)
+    call cp%solve(gz, z)
+  end subroutine active_coarse_solve
 
   !> Global 2-norm of a vector of local coarse blocks.
   real(dp) function coarse_vector_norm(op, z)

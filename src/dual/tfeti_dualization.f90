@@ -67,7 +67,7 @@ contains
                           alpha_scale=sp%alpha_scale, expansion=sp%expansion, m_scale=sp%m_scale, &
                           beta=sp%beta, eta_scale=sp%eta_scale, m_no_step=sp%m_no_step, &
                           rho_growth=sp%rho_growth, rho_contraction=sp%rho_contraction, &
-                          rho_window=sp%rho_window, rho_stall=sp%rho_stall, &
+                          rho_window=sp%rho_window, rho_stall=sp%rho_stall, polish_window=sp%polish_window, &
                           monitor=sp%monitor)
   end function smalbe_settings
 

@@ -81,6 +81,9 @@ module params
     integer(ip) :: rho_window = 10
     !> > 0: the first raise only on a stall (contraction worse than this over rho_window), later ones per iteration
     real(dp) :: rho_stall = 0.95_dp
+    !> > 0: SMALBE's polish (exact face solve) once the active set has not
+    !> changed for this many outer iterations; 0: off (docs/INPUT.md)
+    integer(ip) :: polish_window = 0
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
@@ -483,7 +486,7 @@ contains
     logical :: reading
     integer(ip) :: nsub(3), nel(3), cluster(3), metis_block, distortion_seed, seed, max_outer, max_hessian, power_iterations, &
                    coarse_ranks, &
-                   rho_window
+                   rho_window, polish_window
     real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, rho_growth, &
                 rho_contraction, rho_stall, coarse_blr, &
@@ -499,8 +502,8 @@ contains
     namelist /boundary/ top_dirichlet, top_displacement, symmetry_x0, symmetry_y0
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
-      m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, rho_window, rho_stall, power_iterations, coarse, &
-      coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
+      m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, rho_window, rho_stall, polish_window, &
+      power_iterations, coarse, coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
       f_action, f_storage, share_subdomains, &
       regularization, scaling, stopping, preconditioner, monitor
     namelist /reconstruction/ method, active_tol, kkt_tol
@@ -543,7 +546,7 @@ contains
         alpha_scale = s%alpha_scale; expansion = s%expansion; rho_scale = s%rho_scale
         m_scale = s%m_scale; beta = s%beta; eta_scale = s%eta_scale; m_no_step = s%m_no_step
         rho_growth = s%rho_growth; rho_contraction = s%rho_contraction; rho_window = s%rho_window
-        rho_stall = s%rho_stall
+        rho_stall = s%rho_stall; polish_window = s%polish_window
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
         f_action = s%f_action; f_storage = s%f_storage; share_subdomains = s%share_subdomains
@@ -581,7 +584,7 @@ contains
     case ('solver')
       p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
                                  rho_scale, m_scale, beta, eta_scale, lower(m_no_step), rho_growth, &
-                                 rho_contraction, rho_window, rho_stall, power_iterations, &
+                                 rho_contraction, rho_window, rho_stall, polish_window, power_iterations, &
                                  lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
                                  lower(share_subdomains), &
@@ -678,6 +681,8 @@ contains
       if (s%rho_window < 1) call fail('solver', 'rho_window', 'must be >= 1', ints([s%rho_window]))
       if (.not. (s%rho_stall >= 0 .and. s%rho_stall < 1)) &
         call fail('solver', 'rho_stall', 'must be in [0, 1) (0: off)', reals([s%rho_stall]))
+      if (s%polish_window < 0) &
+        call fail('solver', 'polish_window', 'must be >= 0 (0: off)', ints([s%polish_window]))
       if (s%power_iterations < 1) &
         call fail('solver', 'power_iterations', 'must be >= 1', ints([s%power_iterations]))
       if (.not. one_of(s%coarse, [character(len=8) :: 'mumps', 'cholesky'])) &

@@ -80,6 +80,10 @@ contains
     ! coefficients; null when no run had 2 steps)
     call js%add('preconditioner', dual%preconditioner_name())
     call js%add('preconditioner_applications', int(solver%n_preconditioner, i8))
+    ! SMALBE's polish (exact face solve; its products are in hessian_multiplications)
+    call js%add_each([character(len=24) :: 'polish_window', 'polish_count', 'polish_hessian', 'polish_cg_steps', &
+                      'polish_accepted'], int([solver%polish_window, solver%n_polish, solver%n_polish_hessian, &
+                                               solver%n_polish_steps, solver%n_polish_exact], i8))
     associate (rz => solver%inner%ritz)
       if (rz%n_runs > 0) then
         call js%add_each([character(len=24) :: 'face_condition_estimate', 'face_ritz_min', 'face_ritz_max'], &

@@ -28,6 +28,16 @@
 !> positive definite (an approximate inverse of A); MPRGP then uses it in the
 !> face (its CG steps; mprgp). The QP layer knows nothing else of it.
 !>
+!> Face solver (optional, SMALBE's polish step): a problem with an equality
+!> constraint whose `has_face_solver()` is true can restrict C to the free
+!> rows F of an active set: `face_init(free)` prepares C_F C_F^T (free: the
+!> local mask of F), `face_coefficient(y, c)` gives the multiplier-form
+!> coefficients c (length eq_size, the form eq_apply_t takes) of the least
+!> squares fit (C_F C_F^T)^{-1} C y, so that the face projector onto
+!> {y : y_A = 0, C y = 0} reads P_F y = y_F - (eq_apply_t(c))_F for c of y_F
+!> (see face_solve), and `face_free()` releases it. Problems without it never
+!> polish.
+!>
 !> Stopping test (what the solvers compare with tol): by default the classical
 !> ||g^P|| <= tol ||b|| and ||C x|| <= tol ||b|| in the 2-norm. A problem that
 !> allocates `stop_weight` (w_i > 0, local slice) asks instead for a test per
@@ -111,6 +121,10 @@ module qp_problem
     procedure :: eq_measure => default_eq_measure
     procedure :: has_preconditioner => default_has_preconditioner
     procedure :: precondition => default_precondition
+    procedure :: has_face_solver => default_has_face_solver
+    procedure :: face_init => default_face_init
+    procedure :: face_coefficient => default_face_coefficient
+    procedure :: face_free => default_face_free
     procedure :: init_base
     procedure :: free_base
     procedure :: dot
@@ -270,6 +284,38 @@ contains
     real(dp), intent(out) :: z(:)
     z(1:self%n) = r(1:self%n)
   end subroutine default_precondition
+
+  !> False: no face solver (SMALBE never polishes). Local, no communication.
+  logical function default_has_face_solver(self)
+    class(qp_problem_t), intent(in) :: self
+    default_has_face_solver = .false.
+    if (self%n < 0) default_has_face_solver = .true.   ! never: keeps self referenced
+  end function default_has_face_solver
+
+  !> Prepare C_F C_F^T for the free rows `free` (local mask). Collective.
+  subroutine default_face_init(self, free)
+    class(qp_problem_t), intent(inout) :: self
+    logical, intent(in) :: free(:)
+    character(len=80) :: sizes
+    write (sizes, '(2(a,i0))') 'n = ', self%n, ', size(free) = ', size(free)
+    call fatal_error('qp_problem: face_init not provided by this problem ('//trim(sizes)//')')
+  end subroutine default_face_init
+
+  !> c = (C_F C_F^T)^{-1} C y in the form eq_apply_t takes. Collective.
+  subroutine default_face_coefficient(self, y, c)
+    class(qp_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: y(:)
+    real(dp), intent(out) :: c(:)
+    character(len=80) :: sizes
+    write (sizes, '(2(a,i0))') 'n = ', self%n, ', size(y) = ', size(y)
+    call fatal_error('qp_problem: face_coefficient not provided by this problem ('//trim(sizes)//')')
+    c = 0
+  end subroutine default_face_coefficient
+
+  !> Release what face_init prepared (nothing by default).
+  subroutine default_face_free(self)
+    class(qp_problem_t), intent(inout) :: self
+  end subroutine default_face_free
 
   !> Optional bookkeeping of C x that a problem may keep so that eq_residual
   !> needs no new work: the solver calls track_last when x has become the

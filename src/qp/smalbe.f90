@@ -64,6 +64,19 @@
 !> total (inner solves get the remaining budget); either ends the solve with a
 !> "not converged" status and a message, as do NaN/Inf (qp_status_not_finite).
 !>
+!> 6. optional polish (polish_window > 0, a problem with a face solver,
+!>    qp_problem): once the active set (the x_i at their bound) has not
+!>    changed for polish_window outer iterations, the equality constrained QP
+!>    on that face (x_A = l_A, C x = 0) is solved by PCPG (module face_solve)
+!>    and (x, mu) replaced by its solution and face multiplier; the gradient
+!>    follows (one more product if x had to be projected onto the bounds).
+!>    Its products count in n_hessian. When the active set was the right one,
+!>    the next outer iteration's test accepts the pair at once; otherwise
+!>    SMALBE goes on from it (a feasible warm start: the L test of 4. is not
+!>    applied to that step). At most once per distinct active set and
+!>    smalbe_polish_max times per solve; each run at most smalbe_polish_steps
+!>    CG steps, to smalbe_polish_target times the outer test's bound.
+!>
 !> History: cnorm_history(k) = ||C x_k||, hessian_history(k) = Hessian
 !> multiplications after outer iteration k and rho_history(k) = the penalty of
 !> its inner solve (the SMALBE monitor's columns).
@@ -76,13 +89,15 @@
 !> the status message and the totals.
 module smalbe
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
-  use kinds, only: dp, ip, name_len
+  use kinds, only: dp, ip, name_len, MPI_INT_IP
   use errors, only: fatal_error
   use logger, only: log_message
   use qp_problem, only: qp_problem_t, qp_solver_t, qp_message_len, compensated_add, qp_status_converged, &
-                        qp_status_max_hessian, qp_status_max_outer, qp_status_not_finite, &
+                        no_lower_bound, qp_status_max_hessian, qp_status_max_outer, qp_status_not_finite, &
                         qp_status_incompatible, qp_status_not_run
   use mprgp, only: mprgp_t, mprgp_stop_t, ensure_size
+  use face_solve, only: face_polish_t, free_rows
+  use mpi_f08, only: MPI_Allreduce, MPI_SUM
   implicit none
   private
 
@@ -134,11 +149,19 @@ module smalbe
     !> rho_stall^w ||C x_{k-w}||; after it the per-iteration test with
     !> rho_contraction (w = 1). 0: every raise uses rho_contraction and w
     real(dp) :: rho_stall = 0
+    !> > 0: polish (exact face solve, step 6 of the module) once the active set
+    !> has not changed for this many outer iterations; 0: never
+    integer(ip) :: polish_window = 0
     logical :: monitor = .false.               !< one line per outer iteration and a summary
   end type smalbe_settings_t
 
   !> rho never exceeds rho_cap times its initial value (adaptive penalty)
   real(dp), parameter, public :: smalbe_rho_cap = 100
+  !> polish: at most this many per solve, each at most smalbe_polish_steps CG
+  !> steps, stopped at smalbe_polish_target times the outer test's bound of g^P
+  integer(ip), parameter, public :: smalbe_polish_max = 3
+  integer(ip), parameter, public :: smalbe_polish_steps = 500
+  real(dp), parameter, public :: smalbe_polish_target = 0.1_dp
 
   !> The SMALBE-M solver with its inner MPRGP. All counters are totals of the
   !> last solve (components, for report.json).
@@ -158,6 +181,12 @@ module smalbe
     integer(ip) :: n_rho_updates = 0           !< times rho was raised
     integer(ip) :: max_outer = 200             !< cap of outer iterations
     integer(ip) :: max_hessian = 20000         !< cap of Hessian multiplications in total
+    integer(ip) :: polish_window = 0           !< polish after this many outer iterations of one active set (0: off)
+    type(face_polish_t) :: polish              !< the face solve (its counters: the last polish)
+    integer(ip) :: n_polish = 0                !< polish steps of the last solve
+    integer(ip) :: n_polish_hessian = 0        !< Hessian products of those (included in n_hessian)
+    integer(ip) :: n_polish_steps = 0          !< their CG steps
+    integer(ip) :: n_polish_exact = 0          !< polishes after which the outer test held at once
     ! results of the last solve
     real(dp), allocatable :: muhat(:)          !< final multiplier, hat form (C^T mu = eq_apply_t(muhat))
     real(dp) :: cnorm = 0                      !< ||C x|| at the returned x
@@ -193,6 +222,7 @@ module smalbe
     integer(ip), allocatable :: hessian_history(:)
     real(dp), allocatable :: rho_history(:)    !< the penalty of outer iteration k's inner solve
     real(dp), allocatable, private :: b_lin(:), ct_mu(:), ct_new(:), x_prev(:), g_prev(:)
+    logical, allocatable, private :: free_now(:), free_prev(:)
     type(smalbe_inner_stop_t), private :: rule
   contains
     procedure :: init => smalbe_init
@@ -279,7 +309,7 @@ contains
   !> (default 0.1); monitor: one line per outer iteration and a summary.
   subroutine smalbe_init(self, a_norm, tol, max_outer, max_hessian, gamma, alpha_scale, expansion, &
                          m_scale, beta, eta_scale, monitor, m_no_step, rho_growth, rho_contraction, rho_window, &
-                         rho_stall)
+                         rho_stall, polish_window)
     class(smalbe_t), intent(inout) :: self
     real(dp), intent(in) :: a_norm, tol
     integer(ip), intent(in) :: max_outer, max_hessian
@@ -287,7 +317,7 @@ contains
                                       rho_stall
     character(len=*), intent(in), optional :: expansion, m_no_step
     logical, intent(in), optional :: monitor
-    integer(ip), intent(in), optional :: rho_window
+    integer(ip), intent(in), optional :: rho_window, polish_window
 
     call self%free()
     call self%inner%init(a_norm, tol, max_hessian, gamma, alpha_scale, expansion, monitor=.false.)
@@ -313,6 +343,8 @@ contains
     if (present(rho_window)) self%rho_window = rho_window
     self%rho_stall = 0
     if (present(rho_stall)) self%rho_stall = rho_stall
+    self%polish_window = 0
+    if (present(polish_window)) self%polish_window = polish_window
 
     if (.not. (tol > 0 .and. tol < 1)) call fatal_error('smalbe: tol must be in (0, 1)')
     if (max_outer < 1) call fatal_error('smalbe: max_outer must be >= 1')
@@ -330,6 +362,7 @@ contains
       call fatal_error('smalbe: rho_contraction must be in (0, 1)')
     if (self%rho_window < 1) call fatal_error('smalbe: rho_window must be >= 1')
     if (.not. (self%rho_stall >= 0 .and. self%rho_stall < 1)) call fatal_error('smalbe: rho_stall must be in [0, 1)')
+    if (self%polish_window < 0) call fatal_error('smalbe: polish_window must be >= 0')
   end subroutine smalbe_init
 
   !> The settings `s` at once, with ||A|| = a_norm (penalty included).
@@ -339,7 +372,7 @@ contains
     real(dp), intent(in) :: a_norm
     call self%init(a_norm, s%tol, s%max_outer, s%max_hessian, s%gamma, s%alpha_scale, s%expansion, &
                    s%m_scale, s%beta, s%eta_scale, s%monitor, s%m_no_step, s%rho_growth, s%rho_contraction, &
-                   s%rho_window, s%rho_stall)
+                   s%rho_window, s%rho_stall, s%polish_window)
   end subroutine smalbe_init_with
 
   subroutine smalbe_free(self)
@@ -353,6 +386,7 @@ contains
     if (allocated(self%x_prev)) deallocate (self%x_prev)
     if (allocated(self%g_prev)) deallocate (self%g_prev)
     if (allocated(self%rule%z)) deallocate (self%rule%z)
+    if (allocated(self%free_now)) deallocate (self%free_now, self%free_prev)
     self%status = qp_status_not_run
     self%message = 'not run'
   end subroutine smalbe_free
@@ -393,8 +427,9 @@ contains
     real(dp), intent(inout) :: x(:)
     character(len=qp_message_len) :: reason, buf
     real(dp) :: scale, lagr, change, m_now, q, s(2), hi(2), lo(2), l_shift, rho_old
-    integer(ip) :: n, m, outer, i, n_idle, last_raise, w
-    logical :: gradient_given, failed, raise
+    integer(ip) :: n, m, outer, i, n_idle, last_raise, w, n_stable, changes, local
+    logical :: gradient_given, failed, raise, polishing, polished_set, after_polish
+    integer :: ierr
 
     call reset_counters(self)
     if (.not. self%is_compatible(problem, reason)) then
@@ -414,6 +449,13 @@ contains
     call ensure_size(self%g_prev, n)
     call ensure_size(self%muhat, m)
     call ensure_size(self%rule%z, m)
+    polishing = self%polish_window > 0 .and. problem%has_face_solver()
+    if (allocated(self%free_now)) deallocate (self%free_now, self%free_prev)
+    allocate (self%free_now(n), self%free_prev(n))
+    self%free_prev = .true.
+    n_stable = 0
+    polished_set = .false.
+    after_polish = .false.
 
     self%rho = problem%penalty()
     self%rho_initial = self%rho
@@ -526,9 +568,23 @@ contains
         exit
       end if
       if (self%monitor) call monitor_line(self, problem, x, outer)
+      ! the active set: unchanged for n_stable outer iterations (polish)
+      if (polishing) then
+        call free_rows(problem, x, self%free_now)
+        local = count(self%free_now .neqv. self%free_prev, kind=ip)
+        call MPI_Allreduce(local, changes, 1, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
+        if (outer == 1 .or. changes > 0) then
+          n_stable = 0
+          polished_set = .false.
+        else
+          n_stable = n_stable + 1
+        end if
+        self%free_prev = self%free_now
+      end if
 
       ! 2. outer stopping criterion, caps
       if (self%rule%outer_met()) then
+        if (after_polish .and. self%inner%n_iterations == 0) self%n_polish_exact = self%n_polish_exact + 1
         write (buf, '(3a,es10.3,a,es10.3,3a,es10.3,a,es10.3)') 'converged: ', gp_name(self), ' = ', &
           self%gp_measure, ' <= ', self%tol_gp, ', ', eq_name(self), ' = ', self%eq_measure, ' <= ', self%tol_c
         self%status = qp_status_converged
@@ -570,7 +626,8 @@ contains
       ! stall is broken while M itself follows the theory; 'keep' does nothing.
       ! (l_shift = rho ||C x_{k-1}||^2, plus the change of L(x_{k-1}, mu_k) by a
       ! raised rho, see 5.)
-      failed = outer > 1 .and. change + l_shift < 0.5_dp*self%rho*self%cnorm**2
+      failed = outer > 1 .and. .not. after_polish .and. change + l_shift < 0.5_dp*self%rho*self%cnorm**2
+      after_polish = .false.
       if (self%inner%n_iterations == 0) then
         self%n_no_step = self%n_no_step + 1
         n_idle = n_idle + 1
@@ -622,11 +679,93 @@ contains
         self%n_rho_updates = self%n_rho_updates + 1
         last_raise = outer
       end if
+
+      ! 6. polish: the exact solve on a face that has not changed for polish_window outer iterations
+      if (polishing .and. n_stable >= self%polish_window .and. .not. polished_set .and. &
+          self%n_polish < smalbe_polish_max .and. self%max_hessian - self%n_hessian > 2) then
+        call polish_step(self, problem, x, outer)
+        self%free_prev = self%free_now
+        n_stable = 0
+        polished_set = .true.
+        after_polish = .true.
+        l_shift = 0
+      end if
     end do
     self%n_eq_residual = self%rule%n_eq_residual
     self%n_active = problem%count_at_bound(x)
     if (self%monitor) call monitor_summary(self)
   end subroutine smalbe_solve
+
+  !> Step 6 of the module: the face solve on the free rows free_now, then
+  !> (x, muhat, gradient) handed back to the outer loop. When free rows end
+  !> below their bound, x is projected and the new face solved at once (a
+  !> primal active-set step), up to smalbe_polish_max polishes. Collective.
+  subroutine polish_step(self, problem, x, outer)
+    class(smalbe_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(inout) :: x(:)
+    integer(ip), intent(in) :: outer
+    integer(ip) :: n, i, budget, counts(2), local(2)
+    integer :: ierr
+    real(dp) :: wi
+    logical :: again
+    character(len=300) :: buf
+    n = problem%n
+    again = .true.
+    do while (again)
+      budget = min(smalbe_polish_steps, self%max_hessian - self%n_hessian - 2)
+      call problem%face_init(self%free_now)
+      call self%polish%run(problem, self%free_now, x, self%gradient, self%muhat, &
+                           smalbe_polish_target*self%tol_gp, self%per_component, budget)
+      call problem%face_free()
+      self%n_polish = self%n_polish + 1
+      self%n_hessian = self%n_hessian + self%polish%n_hessian
+      self%n_polish_hessian = self%n_polish_hessian + self%polish%n_hessian
+      self%n_polish_steps = self%n_polish_steps + self%polish%n_steps
+      self%n_preconditioner = self%n_preconditioner + self%polish%n_precondition
+      ! the gradient of the Lagrangian with the face multiplier
+      call problem%eq_apply_t(self%muhat, self%ct_mu)
+      do i = 1, n
+        self%b_lin(i) = problem%b(i) - self%ct_mu(i)
+        self%gradient(i) = self%gradient(i) + self%ct_mu(i)
+      end do
+      ! free rows below their bound (projected: MPRGP needs a feasible x), and
+      ! active rows whose gradient has the wrong sign (beyond the test's bound)
+      local = 0
+      do i = 1, n
+        if (problem%lower(i) <= no_lower_bound) cycle
+        if (self%free_now(i) .and. x(i) < problem%lower(i)) local(1) = local(1) + 1
+        wi = 1
+        if (allocated(problem%stop_weight)) wi = problem%stop_weight(i)
+        if (.not. self%free_now(i) .and. wi*self%gradient(i) < -self%tol_gp) local(2) = local(2) + 1
+      end do
+      call MPI_Allreduce(local, counts, 2, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
+      if (self%monitor) then
+        write (buf, '(a,i0,a,i0,a,i0,a,es9.2,a,es9.2,a,es9.2,a,l1,a,i0,a,i0,a)') 'polish after outer ', outer, &
+          ': ', self%polish%n_steps, ' CG steps, ', self%polish%n_hessian, ' products, residual ', &
+          self%polish%measure0, ' -> ', self%polish%measure, ' (target ', smalbe_polish_target*self%tol_gp, &
+          ', reached ', self%polish%reached, '); ', counts(1), ' free rows projected onto their bound, ', &
+          counts(2), ' active rows with a wrong-sign gradient'
+        call log_message(trim(buf))
+      end if
+      again = counts(1) > 0 .and. self%n_polish < smalbe_polish_max .and. &
+              self%max_hessian - self%n_hessian > 2 .and. .not. self%polish%breakdown
+      if (counts(1) > 0) then
+        call problem%project(x)
+        call problem%track_reset()
+        if (again) then
+          call free_rows(problem, x, self%free_now)
+        else
+          ! the gradient at the projected x for the inner MPRGP
+          call problem%hessian(x, self%gradient)
+          call problem%track_last()
+          self%gradient(1:n) = self%gradient(1:n) - self%b_lin(1:n)
+          self%n_hessian = self%n_hessian + 1
+          self%n_polish_hessian = self%n_polish_hessian + 1
+        end if
+      end if
+    end do
+  end subroutine polish_step
 
   !> 'tol not met: ||g^P|| = .. (must be <= ..), ||C x|| = .. (must be <= ..)'.
   function distance_to_tol(self) result(text)
@@ -697,6 +836,10 @@ contains
     self%n_norm_updates = 0
     self%n_active = 0
     self%n_preconditioner = 0
+    self%n_polish = 0
+    self%n_polish_hessian = 0
+    self%n_polish_steps = 0
+    self%n_polish_exact = 0
     self%cnorm_history = [real(dp) ::]
     self%hessian_history = [integer(ip) ::]
     self%rho_history = [real(dp) ::]
@@ -752,6 +895,11 @@ contains
         ' (Ritz values ', self%inner%ritz%theta_min, ' .. ', self%inner%ritz%theta_max, '; CG runs ', &
         self%inner%ritz%n_runs, ', longest ', self%inner%ritz%longest
       call log_message(trim(buf)//')')
+    end if
+    if (self%n_polish > 0) then
+      write (buf, '(a,i0,a,i0,a,i0,a,i0,a)') '  polish ', self%n_polish, ' times (', self%n_polish_steps, &
+        ' CG steps, ', self%n_polish_hessian, ' Hessian multiplications; accepted at once ', self%n_polish_exact, ')'
+      call log_message(buf)
     end if
     if (self%n_norm_updates > 0) then
       write (buf, '(a,es10.3,a,es10.3,a,i0,a)') '  ||A|| estimate raised from ', self%a_norm, ' to ', &

@@ -1,0 +1,195 @@
+!> The exact solve on a face of the feasible set (SMALBE's polish step):
+!>
+!>     min 1/2 x^T A x - b^T x   s.t.  x_A = l_A,  C x = 0,
+!>
+!> A the active rows (at their bound), F the free rows (the others, and every
+!> row without a bound). With the face projector
+!>
+!>     P_F y = y_F - C_F^T (C_F C_F^T)^{-1} C_F y_F      (zero on A)
+!>
+!> onto {y : y_A = 0, C y = 0} (C_F the columns of C on F), the problem is a
+!> linear one on Im P_F, solved by projected preconditioned CG (PCPG):
+!> 1. start: x_A := l_A, then x_F -= C_F^T (C_F C_F^T)^{-1} C x (C x = 0);
+!> 2. r = -P_F g, g = A x - b, z = P_F M_F^{-1} r (M^{-1} the problem's
+!>    preconditioner on the rows F, or none), standard CG recurrences; the
+!>    gradient g follows each step (g <- g + alpha A p), r is projected anew;
+!> 3. stop when the stopping measure of r (the problem's weighted maximum
+!>    with a per-component test, else ||r||) is <= target, or after max_steps
+!>    steps or the Hessian budget.
+!> The multiplier that makes the face's KKT conditions hold in the least
+!> squares sense is mu = -(C_F C_F^T)^{-1} C_F g_F (returned in the form
+!> eq_apply_t takes, `muhat`), so that g + C^T mu = P_F g on F.
+!> On Im P_F, C p = 0, so A p = A_0 p (the penalty rho C^T C drops out) and
+!> P_F A_0 = P_F F for the FETI dual (P_F kills Im G^T): the face problem is
+!> the same with or without the penalty and the FETI projector P.
+!> The problem provides C_F C_F^T through qp_problem's face hooks
+!> (face_init, face_coefficient). Every routine is collective.
+module face_solve
+  use kinds, only: dp, ip
+  use qp_problem, only: qp_problem_t, no_lower_bound
+  implicit none
+  private
+
+  public :: face_project, free_rows
+
+  !> Counters and outcome of the last polish.
+  type, public :: face_polish_t
+    integer(ip) :: n_hessian = 0       !< Hessian products of the last run
+    integer(ip) :: n_steps = 0         !< CG steps of the last run
+    integer(ip) :: n_precondition = 0  !< preconditioner applications of the last run
+    real(dp) :: measure0 = 0           !< stopping measure of r at the start
+    real(dp) :: measure = 0            !< ... at the end
+    logical :: reached = .false.       !< measure <= target
+    logical :: breakdown = .false.     !< p^T A p <= 0 or not finite
+    real(dp), allocatable, private :: r(:), z(:), p(:), q(:), w(:)
+  contains
+    procedure :: run
+  end type face_polish_t
+
+contains
+
+  !> free(i): x_i is not at a finite lower bound (local, no communication).
+  subroutine free_rows(problem, x, free)
+    class(qp_problem_t), intent(in) :: problem
+    real(dp), intent(in) :: x(:)
+    logical, intent(out) :: free(:)
+    integer(ip) :: i
+    do i = 1, problem%n
+      free(i) = .true.
+      if (problem%lower(i) > no_lower_bound) free(i) = x(i) > problem%lower(i)
+    end do
+  end subroutine free_rows
+
+  !> py = P_F y (y restricted to F first; py may not be y); c: the
+  !> coefficients of C_F^T (C_F C_F^T)^{-1} C_F y_F (eq_size). Collective.
+  subroutine face_project(problem, free, y, py, c)
+    class(qp_problem_t), intent(inout) :: problem
+    logical, intent(in) :: free(:)
+    real(dp), intent(in) :: y(:)
+    real(dp), intent(inout) :: py(:)
+    real(dp), intent(out) :: c(:)
+    real(dp), allocatable :: w(:)
+    integer(ip) :: n
+    n = problem%n
+    allocate (w(n))
+    w = merge(y(1:n), 0.0_dp, free(1:n))
+    call problem%face_coefficient(w, c)
+    call problem%eq_apply_t(c, py)
+    py(1:n) = merge(w - py(1:n), 0.0_dp, free(1:n))
+  end subroutine face_project
+
+  !> PCPG on the face of `free` (face_init(free) already called) from x;
+  !> on return x is on the face (x_A = l_A, C x = 0 up to the coarse solves),
+  !> g = A x - b (without multiplier) and muhat the face multiplier (see the
+  !> module). per_component: measure r by problem%weighted_max, else ||r||.
+  subroutine run(self, problem, free, x, g, muhat, target, per_component, max_steps)
+    class(face_polish_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    logical, intent(in) :: free(:)
+    real(dp), intent(inout) :: x(:)
+    real(dp), intent(out) :: g(:), muhat(:)
+    real(dp), intent(in) :: target
+    logical, intent(in) :: per_component
+    integer(ip), intent(in) :: max_steps
+    real(dp) :: rz, rz_new, pq, alpha
+    integer(ip) :: n
+    logical :: prec
+
+    n = problem%n
+    call ensure(self%r, n)
+    call ensure(self%z, n)
+    call ensure(self%p, n)
+    call ensure(self%q, n)
+    call ensure(self%w, n)
+    self%n_hessian = 0
+    self%n_steps = 0
+    self%n_precondition = 0
+    self%reached = .false.
+    self%breakdown = .false.
+    prec = problem%has_preconditioner()
+
+    ! 1. onto the face: x_A = l_A, then C x = 0 by the least squares correction on F
+    x(1:n) = merge(x(1:n), problem%lower(1:n), free(1:n))
+    call problem%face_coefficient(x, muhat)
+    call problem%eq_apply_t(muhat, self%w)
+    x(1:n) = x(1:n) - merge(self%w, 0.0_dp, free(1:n))
+    call problem%track_reset()
+
+    ! 2. PCPG
+    call problem%hessian(x, g)
+    self%n_hessian = 1
+    g(1:n) = g(1:n) - problem%b(1:n)
+    call face_project(problem, free, g, self%r, muhat)
+    self%r = -self%r
+    self%measure0 = measure(self%r)
+    self%measure = self%measure0
+    self%reached = self%measure <= target
+    if (.not. self%reached) then
+      call precondition(self%z)
+      self%p = self%z
+      rz = problem%dot(self%r, self%z)
+      do while (self%n_steps < max_steps)
+        call problem%hessian(self%p, self%q)
+        self%n_hessian = self%n_hessian + 1
+        self%n_steps = self%n_steps + 1
+        pq = problem%dot(self%p, self%q)
+        if (.not. (pq > 0 .and. pq < huge(1.0_dp))) then
+          self%breakdown = .true.
+          exit
+        end if
+        alpha = rz/pq
+        x(1:n) = x(1:n) + alpha*self%p
+        g(1:n) = g(1:n) + alpha*self%q
+        call face_project(problem, free, g, self%r, muhat)
+        self%r = -self%r
+        self%measure = measure(self%r)
+        if (self%measure <= target) then
+          self%reached = .true.
+          exit
+        end if
+        call precondition(self%z)
+        rz_new = problem%dot(self%r, self%z)
+        self%p = self%z + (rz_new/rz)*self%p
+        rz = rz_new
+      end do
+    end if
+    call problem%track_reset()
+
+    ! 3. the face multiplier mu = -(C_F C_F^T)^{-1} C_F g_F
+    call face_project(problem, free, g, self%w, muhat)
+    muhat = -muhat
+
+  contains
+
+    real(dp) function measure(v)
+      real(dp), intent(in) :: v(:)
+      if (per_component) then
+        measure = problem%weighted_max(v)
+      else
+        measure = problem%norm(v)
+      end if
+    end function measure
+
+    !> z = P_F M_F^{-1} r (r itself without preconditioner).
+    subroutine precondition(z)
+      real(dp), intent(out) :: z(:)
+      if (.not. prec) then
+        z = self%r
+        return
+      end if
+      self%w = merge(self%r, 0.0_dp, free(1:n))
+      call problem%precondition(self%w, self%q)
+      self%n_precondition = self%n_precondition + 1
+      call face_project(problem, free, self%q, z, muhat)
+    end subroutine precondition
+  end subroutine run
+
+  subroutine ensure(v, n)
+    real(dp), allocatable, intent(inout) :: v(:)
+    integer(ip), intent(in) :: n
+    if (allocated(v)) then
+      if (size(v) /= n) deallocate (v)
+    end if
+    if (.not. allocated(v)) allocate (v(n))
+  end subroutine ensure
+end module face_solve
