@@ -66,7 +66,8 @@
 !>
 !> 6. optional polish (polish_window > 0, a problem with a face solver,
 !>    qp_problem): once the active set (the x_i at their bound) has not
-!>    changed for polish_window outer iterations, the equality constrained QP
+!>    changed for polish_window outer iterations whose inner solve made a
+!>    step, the equality constrained QP
 !>    on that face (x_A = l_A, C x = 0) is solved by PCPG (module face_solve)
 !>    and (x, mu) replaced by its solution and face multiplier; the gradient
 !>    follows (one more product if x had to be projected onto the bounds).
@@ -74,7 +75,9 @@
 !>    the next outer iteration's test accepts the pair at once; otherwise
 !>    SMALBE goes on from it (a feasible warm start: the L test of 4. is not
 !>    applied to that step). At most once per distinct active set and
-!>    smalbe_polish_max times per solve; each run at most smalbe_polish_steps
+!>    smalbe_polish_max times per solve (each up to smalbe_polish_rounds face
+!>    solves: a face solve whose x leaves a bound on a free row is projected
+!>    and the new face solved at once); each at most smalbe_polish_steps
 !>    CG steps, to smalbe_polish_target times the outer test's bound.
 !>
 !> History: cnorm_history(k) = ||C x_k||, hessian_history(k) = Hessian
@@ -160,6 +163,8 @@ module smalbe
   !> polish: at most this many per solve, each at most smalbe_polish_steps CG
   !> steps, stopped at smalbe_polish_target times the outer test's bound of g^P
   integer(ip), parameter, public :: smalbe_polish_max = 3
+  !> a polish whose x leaves the bounds on free rows solves the projected face at once, at most this many rounds
+  integer(ip), parameter, public :: smalbe_polish_rounds = 3
   integer(ip), parameter, public :: smalbe_polish_steps = 500
   real(dp), parameter, public :: smalbe_polish_target = 0.1_dp
 
@@ -184,6 +189,7 @@ module smalbe
     integer(ip) :: polish_window = 0           !< polish after this many outer iterations of one active set (0: off)
     type(face_polish_t) :: polish              !< the face solve (its counters: the last polish)
     integer(ip) :: n_polish = 0                !< polish steps of the last solve
+    integer(ip) :: n_polish_rounds = 0         !< face solves of those (rounds after projections included)
     integer(ip) :: n_polish_hessian = 0        !< Hessian products of those (included in n_hessian)
     integer(ip) :: n_polish_steps = 0          !< their CG steps
     integer(ip) :: n_polish_exact = 0          !< polishes after which the outer test held at once
@@ -576,8 +582,8 @@ contains
         if (outer == 1 .or. changes > 0) then
           n_stable = 0
           polished_set = .false.
-        else
-          n_stable = n_stable + 1
+        else if (self%inner%n_iterations > 0) then
+          n_stable = n_stable + 1      ! only outer iterations that moved x count
         end if
         self%free_prev = self%free_now
       end if
@@ -627,15 +633,15 @@ contains
       ! (l_shift = rho ||C x_{k-1}||^2, plus the change of L(x_{k-1}, mu_k) by a
       ! raised rho, see 5.)
       failed = outer > 1 .and. .not. after_polish .and. change + l_shift < 0.5_dp*self%rho*self%cnorm**2
-      after_polish = .false.
       if (self%inner%n_iterations == 0) then
         self%n_no_step = self%n_no_step + 1
         n_idle = n_idle + 1
       else
         n_idle = 0
       end if
-      if (self%m_no_step == 'cut' .and. self%inner%n_iterations == 0) failed = .true.
+      if (self%m_no_step == 'cut' .and. self%inner%n_iterations == 0 .and. .not. after_polish) failed = .true.
       if (self%m_no_step /= 'temporary') n_idle = 0
+      after_polish = .false.
       if (failed) then
         m_now = self%beta*m_now
         self%n_m_updates = self%n_m_updates + 1
@@ -705,20 +711,23 @@ contains
     class(qp_problem_t), intent(inout) :: problem
     real(dp), intent(inout) :: x(:)
     integer(ip), intent(in) :: outer
-    integer(ip) :: n, i, budget, counts(2), local(2)
+    integer(ip) :: n, i, budget, counts(2), local(2), rounds
     integer :: ierr
     real(dp) :: wi
     logical :: again
     character(len=300) :: buf
     n = problem%n
     again = .true.
+    self%n_polish = self%n_polish + 1
+    rounds = 0
     do while (again)
+      rounds = rounds + 1
       budget = min(smalbe_polish_steps, self%max_hessian - self%n_hessian - 2)
       call problem%face_init(self%free_now)
       call self%polish%run(problem, self%free_now, x, self%gradient, self%muhat, &
                            smalbe_polish_target*self%tol_gp, self%per_component, budget)
       call problem%face_free()
-      self%n_polish = self%n_polish + 1
+      self%n_polish_rounds = self%n_polish_rounds + 1
       self%n_hessian = self%n_hessian + self%polish%n_hessian
       self%n_polish_hessian = self%n_polish_hessian + self%polish%n_hessian
       self%n_polish_steps = self%n_polish_steps + self%polish%n_steps
@@ -748,7 +757,7 @@ contains
           counts(2), ' active rows with a wrong-sign gradient'
         call log_message(trim(buf))
       end if
-      again = counts(1) > 0 .and. self%n_polish < smalbe_polish_max .and. &
+      again = counts(1) > 0 .and. rounds < smalbe_polish_rounds .and. &
               self%max_hessian - self%n_hessian > 2 .and. .not. self%polish%breakdown
       if (counts(1) > 0) then
         call problem%project(x)
@@ -837,6 +846,7 @@ contains
     self%n_active = 0
     self%n_preconditioner = 0
     self%n_polish = 0
+    self%n_polish_rounds = 0
     self%n_polish_hessian = 0
     self%n_polish_steps = 0
     self%n_polish_exact = 0
@@ -897,7 +907,8 @@ contains
       call log_message(trim(buf)//')')
     end if
     if (self%n_polish > 0) then
-      write (buf, '(a,i0,a,i0,a,i0,a,i0,a)') '  polish ', self%n_polish, ' times (', self%n_polish_steps, &
+      write (buf, '(a,i0,a,i0,a,i0,a,i0,a,i0,a)') '  polish ', self%n_polish, ' times (', self%n_polish_rounds, &
+        ' face solves, ', self%n_polish_steps, &
         ' CG steps, ', self%n_polish_hessian, ' Hessian multiplications; accepted at once ', self%n_polish_exact, ')'
       call log_message(buf)
     end if
