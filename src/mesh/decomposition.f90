@@ -537,11 +537,42 @@ contains
   end function node_subdomains
 
   !> The same as node_subdomains without allocation: ids(1:n), n <= 8.
+  !> Box decompositions by index arithmetic (per direction the one or two
+  !> subdomain layers the node touches; ascending with k slowest), others
+  !> from the subdomains of the elements around the node.
   pure subroutine node_subdomain_list(this, gid, ids, n)
     class(decomposition_t), intent(in) :: this
     integer(ip), intent(in) :: gid
     integer(ip), intent(out) :: ids(8), n
-    integer(ip) :: near(27), nnear, k, s, m, pos
+    integer(ip) :: near(27), nnear, k, s, m, pos, ijk(3), layer(2, 3), nlayer(3), d, i, j
+    if (this%is_box()) then
+      ijk = this%mesh%node_ijk(gid)
+      layer = -1
+      nlayer = 0
+      do d = 1, 3
+        if (ijk(d) > 0) then
+          nlayer(d) = 1
+          layer(1, d) = (ijk(d) - 1)/this%mesh%nel(d)
+        end if
+        if (ijk(d) < this%mesh%ng(d)) then
+          s = ijk(d)/this%mesh%nel(d)
+          if (layer(1, d) /= s) then     ! (layer(1, d) = -1 when unset)
+            nlayer(d) = nlayer(d) + 1
+            layer(nlayer(d), d) = s
+          end if
+        end if
+      end do
+      n = 0
+      do k = 1, nlayer(3)
+        do j = 1, nlayer(2)
+          do i = 1, nlayer(1)
+            n = n + 1
+            ids(n) = 1 + layer(i, 1) + this%mesh%nsub(1)*(layer(j, 2) + this%mesh%nsub(2)*layer(k, 3))
+          end do
+        end do
+      end do
+      return
+    end if
     call this%mesh%elements_near(this%mesh%node_ijk(gid), -1_ip, 0_ip, near, nnear)
     n = 0
     do k = 1, nnear
