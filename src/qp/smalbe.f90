@@ -77,7 +77,8 @@
 !>    applied to that step). At most once per distinct active set and
 !>    smalbe_polish_max times per solve (each up to smalbe_polish_rounds face
 !>    solves: a face solve whose x leaves a bound on a free row is projected
-!>    and the new face solved at once); each at most smalbe_polish_steps
+!>    and the new face solved at once); each at most smalbe_polish_steps and
+!>    at most max(smalbe_polish_min_steps, the products spent so far)
 !>    CG steps, to smalbe_polish_target times the outer test's bound.
 !>
 !> History: cnorm_history(k) = ||C x_k||, hessian_history(k) = Hessian
@@ -166,6 +167,7 @@ module smalbe
   !> a polish whose x leaves the bounds on free rows solves the projected face at once, at most this many rounds
   integer(ip), parameter, public :: smalbe_polish_rounds = 3
   integer(ip), parameter, public :: smalbe_polish_steps = 500
+  integer(ip), parameter, public :: smalbe_polish_min_steps = 30
   real(dp), parameter, public :: smalbe_polish_target = 0.1_dp
 
   !> The SMALBE-M solver with its inner MPRGP. All counters are totals of the
@@ -722,7 +724,10 @@ contains
     rounds = 0
     do while (again)
       rounds = rounds + 1
-      budget = min(smalbe_polish_steps, self%max_hessian - self%n_hessian - 2)
+      ! at most as many steps as the solve has spent so far (at least smalbe_polish_min_steps):
+      ! a face that CG solves slowly (inner-bound cases) costs at most twice the products
+      budget = min(smalbe_polish_steps, max(smalbe_polish_min_steps, self%n_hessian), &
+                   self%max_hessian - self%n_hessian - 2)
       call problem%face_init(self%free_now)
       call self%polish%run(problem, self%free_now, x, self%gradient, self%muhat, &
                            smalbe_polish_target*self%tol_gp, self%per_component, budget)
