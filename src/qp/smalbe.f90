@@ -80,6 +80,8 @@
 !>    and the new face solved at once); each at most smalbe_polish_steps and
 !>    at most max(smalbe_polish_min_steps, the products spent so far)
 !>    CG steps, to smalbe_polish_target times the outer test's bound.
+!>    Timer 'polish' (a part of 'solve': the face matrix's assembly and
+!>    factorization, the CG steps with their products).
 !>
 !> History: cnorm_history(k) = ||C x_k||, hessian_history(k) = Hessian
 !> multiplications after outer iteration k and rho_history(k) = the penalty of
@@ -96,6 +98,7 @@ module smalbe
   use kinds, only: dp, ip, name_len, MPI_INT_IP
   use errors, only: fatal_error
   use logger, only: log_message
+  use timers, only: timer_start, timer_stop
   use qp_problem, only: qp_problem_t, qp_solver_t, qp_message_len, compensated_add, qp_status_converged, &
                         no_lower_bound, qp_status_max_hessian, qp_status_max_outer, qp_status_not_finite, &
                         qp_status_incompatible, qp_status_not_run
@@ -718,6 +721,7 @@ contains
     real(dp) :: wi
     logical :: again
     character(len=300) :: buf
+    call timer_start('polish')
     n = problem%n
     again = .true.
     self%n_polish = self%n_polish + 1
@@ -779,6 +783,7 @@ contains
         end if
       end if
     end do
+    call timer_stop('polish')
   end subroutine polish_step
 
   !> 'tol not met: ||g^P|| = .. (must be <= ..), ||C x|| = .. (must be <= ..)'.
