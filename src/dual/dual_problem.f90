@@ -93,6 +93,8 @@ module dual_problem
     procedure :: face_init
     procedure :: face_coefficient
     procedure :: face_free
+    procedure :: face_operator
+    procedure :: face_precondition
     procedure :: hessian_norm
     procedure :: alpha_bar
     procedure :: free
@@ -251,6 +253,31 @@ contains
     if (.not. self%face_ready) call fatal_error('dual_problem: face_coefficient before face_init')
     call active_coarse_solve(self%op, self%face_cp, y, c)
   end subroutine face_coefficient
+
+  !> q = F p / s: for p in Ker G (P p = p) the Hessian is P F p / s, and
+  !> P_F kills the rows of G^T that the outer P adds (P_F R_F G^T = 0), so
+  !> P_F q = P_F A p without the two coarse solves of P.
+  subroutine face_operator(self, p, q)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: p(:)
+    real(dp), intent(out) :: q(:)
+    call self%op%apply_f(p, q)
+    q(1:self%n) = q(1:self%n)/self%scale
+  end subroutine face_operator
+
+  !> z = s M^{-1} r (FETI's PCPG preconditioner without the projections of
+  !> M_A^{-1}; P_F follows in face_solve), r itself without preconditioner.
+  subroutine face_precondition(self, r, z)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: r(:)
+    real(dp), intent(out) :: z(:)
+    if (.not. self%use_prec) then
+      z(1:self%n) = r(1:self%n)
+      return
+    end if
+    call self%prec%apply(r, z)
+    z(1:self%n) = self%scale*z(1:self%n)
+  end subroutine face_precondition
 
   subroutine face_free(self)
     class(dual_problem_t), intent(inout) :: self

@@ -11,8 +11,10 @@
 !> linear one on Im P_F, solved by projected preconditioned CG (PCPG):
 !> 1. start: x_A := l_A, then x_F -= C_F^T (C_F C_F^T)^{-1} C x (C x = 0);
 !> 2. r = -P_F g, g = A x - b, z = P_F M_F^{-1} r (M^{-1} the problem's
-!>    preconditioner on the rows F, or none), standard CG recurrences; the
-!>    gradient g follows each step (g <- g + alpha A p), r is projected anew;
+!>    face_precondition on the rows F, or none), standard CG recurrences; the
+!>    gradient g follows each step (g <- g + alpha q, q = face_operator(p),
+!>    P_F q = P_F A p), r is projected anew; at the end g = A x - b afresh
+!>    (one more product);
 !> 3. stop when the stopping measure of r (the problem's weighted maximum
 !>    with a per-component test, else ||r||) is <= target, or after max_steps
 !>    steps or the Hessian budget.
@@ -129,7 +131,7 @@ contains
       self%p = self%z
       rz = problem%dot(self%r, self%z)
       do while (self%n_steps < max_steps)
-        call problem%hessian(self%p, self%q)
+        call problem%face_operator(self%p, self%q)
         self%n_hessian = self%n_hessian + 1
         self%n_steps = self%n_steps + 1
         pq = problem%dot(self%p, self%q)
@@ -153,9 +155,14 @@ contains
         rz = rz_new
       end do
     end if
+    ! 3. the gradient afresh (face_operator may differ from A off P_F's range)
+    ! and the face multiplier mu = -(C_F C_F^T)^{-1} C_F g_F
+    if (self%n_steps > 0) then
+      call problem%hessian(x, g)
+      self%n_hessian = self%n_hessian + 1
+      g(1:n) = g(1:n) - problem%b(1:n)
+    end if
     call problem%track_reset()
-
-    ! 3. the face multiplier mu = -(C_F C_F^T)^{-1} C_F g_F
     call face_project(problem, free, g, self%w, muhat)
     muhat = -muhat
 
@@ -178,7 +185,7 @@ contains
         return
       end if
       self%w = merge(self%r, 0.0_dp, free(1:n))
-      call problem%precondition(self%w, self%q)
+      call problem%face_precondition(self%w, self%q)
       self%n_precondition = self%n_precondition + 1
       call face_project(problem, free, self%q, z, muhat)
     end subroutine precondition

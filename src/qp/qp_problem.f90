@@ -36,7 +36,10 @@
 !> squares fit (C_F C_F^T)^{-1} C y, so that the face projector onto
 !> {y : y_A = 0, C y = 0} reads P_F y = y_F - (eq_apply_t(c))_F for c of y_F
 !> (see face_solve), and `face_free()` releases it. Problems without it never
-!> polish.
+!> polish. Two optional shortcuts for vectors of the face (C p = 0, p_A = 0),
+!> used only under P_F: `face_operator(p, q)` with P_F q = P_F A p (default:
+!> the Hessian) and `face_precondition(r, z)` with P_F z an SPD preconditioner
+!> on the face (default: precondition).
 !>
 !> Stopping test (what the solvers compare with tol): by default the classical
 !> ||g^P|| <= tol ||b|| and ||C x|| <= tol ||b|| in the 2-norm. A problem that
@@ -125,6 +128,8 @@ module qp_problem
     procedure :: face_init => default_face_init
     procedure :: face_coefficient => default_face_coefficient
     procedure :: face_free => default_face_free
+    procedure :: face_operator => default_face_operator
+    procedure :: face_precondition => default_face_precondition
     procedure :: init_base
     procedure :: free_base
     procedure :: dot
@@ -311,6 +316,22 @@ contains
     call fatal_error('qp_problem: face_coefficient not provided by this problem ('//trim(sizes)//')')
     c = 0
   end subroutine default_face_coefficient
+
+  !> q with P_F q = P_F A p for p on the face: the Hessian by default.
+  subroutine default_face_operator(self, p, q)
+    class(qp_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: p(:)
+    real(dp), intent(out) :: q(:)
+    call self%hessian(p, q)
+  end subroutine default_face_operator
+
+  !> The face's preconditioner before P_F: precondition by default.
+  subroutine default_face_precondition(self, r, z)
+    class(qp_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: r(:)
+    real(dp), intent(out) :: z(:)
+    call self%precondition(r, z)
+  end subroutine default_face_precondition
 
   !> Release what face_init prepared (nothing by default).
   subroutine default_face_free(self)
