@@ -80,13 +80,13 @@ contains
       ! most 27 entries) sort several times faster than by heap sort
       do i = 2, n
         t = a(i)
-        j = i - 1
-        do while (j >= 1)
-          if (a(j) <= t) exit
-          a(j + 1) = a(j)
+        j = i                    ! a(j) <- t after shifting a(j:i-1) up by one
+        do while (j > 1)
+          if (a(j - 1) <= t) exit
           j = j - 1
         end do
-        a(j + 1) = t
+        a(j + 1:i) = a(j:i - 1)
+        a(j) = t
       end do
       return
     end if

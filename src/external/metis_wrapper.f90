@@ -9,7 +9,7 @@ module metis_wrapper
   implicit none
   private
 
-  public :: metis_part_mesh_dual, metis_part_graph_kway, metis_node_nd
+  public :: metis_part_graph_kway, metis_node_nd
 
   integer, parameter :: metis_noptions = 40
   integer, parameter :: metis_ok = 1
@@ -21,18 +21,6 @@ module metis_wrapper
       import :: c_int
       integer(c_int), intent(inout) :: options(*)
     end function c_set_default_options
-
-    integer(c_int) function c_part_mesh_dual(ne, nn, eptr, eind, vwgt, vsize, ncommon, nparts, &
-                                             tpwgts, options, objval, epart, npart) &
-      bind(C, name='METIS_PartMeshDual')
-      import :: c_int, c_ptr
-      integer(c_int), intent(in) :: ne, nn, ncommon, nparts
-      integer(c_int), intent(in) :: eptr(*), eind(*)
-      type(c_ptr), value :: vwgt, vsize, tpwgts
-      integer(c_int), intent(in) :: options(*)
-      integer(c_int), intent(out) :: objval
-      integer(c_int), intent(out) :: epart(*), npart(*)
-    end function c_part_mesh_dual
 
     integer(c_int) function c_part_graph_kway(nvtxs, ncon, xadj, adjncy, vwgt, vsize, adjwgt, &
                                               nparts, tpwgts, ubvec, options, objval, part) &
@@ -69,28 +57,6 @@ contains
     options(opt_seed) = 1
     if (contiguous) options(opt_contig) = 1
   end subroutine default_options
-
-  !> Partition a mesh into `nparts` parts by its dual graph (elements that
-  !> share `ncommon` nodes are neighbours: 4 for hexahedral faces).
-  !> eptr(ne+1), eind: element -> nodes (1-based CSR); epart(ne): part of each
-  !> element, 1..nparts.
-  subroutine metis_part_mesh_dual(ne, nn, eptr, eind, ncommon, nparts, epart)
-    integer(ip), intent(in) :: ne, nn, ncommon, nparts
-    integer(ip), intent(in) :: eptr(:), eind(:)
-    integer(ip), intent(out) :: epart(:)
-    integer(c_int) :: options(metis_noptions), objval, status
-    integer(c_int), allocatable :: npart(:)
-
-    if (nparts == 1) then
-      epart(1:ne) = 1
-      return
-    end if
-    call default_options(options, .false.)
-    allocate (npart(nn))
-    status = c_part_mesh_dual(ne, nn, eptr, eind, c_null_ptr, c_null_ptr, ncommon, nparts, &
-                              c_null_ptr, options, objval, epart, npart)
-    if (status /= metis_ok) call fatal_error('METIS_PartMeshDual failed')
-  end subroutine metis_part_mesh_dual
 
   !> Partition a graph (1-based CSR xadj(n+1), adjncy, no self loops) into
   !> `nparts` parts; optional vertex weights. part(n): 1..nparts.

@@ -27,6 +27,8 @@ module class_operator
   implicit none
   private
 
+  public :: sandwich
+
   type, public :: class_operator_t
     type(subdomain_classes_t) :: classes
     integer(ip), allocatable :: cn(:)             !< (nclass) n_c
@@ -244,24 +246,35 @@ contains
     integer(ip), intent(in) :: s
     integer(ip), allocatable, intent(out) :: rows(:)
     real(dp), allocatable, intent(out) :: fs(:, :)
-    integer(ip) :: c, n, i, j, e1, e2, nb
+    integer(ip) :: c, n
     integer(i8) :: o
     c = this%classes%class_of(s)
     n = this%cn(c)
     o = this%coff(c)
     if (this%sparse) call fatal_error('class_operator%local_matrix: dense storage only')
-    nb = this%eoff(s + 1) - this%eoff(s)
-    rows = this%erow(this%eoff(s) + 1:this%eoff(s + 1))
+    call sandwich(this%erow(this%eoff(s) + 1:this%eoff(s + 1)), this%edof(this%eoff(s) + 1:this%eoff(s + 1)), &
+                  this%eval(this%eoff(s) + 1:this%eoff(s + 1)), &
+                  this%factor(s)*reshape(this%mat(o + 1:o + int(n, i8)*n), [n, n]), rows, fs)
+  end subroutine local_matrix
+
+  !> fs = B^ m B^^T on the rows of B^'s entries (erow, edof, eval: row, dof
+  !> of m, value), rows = erow: the dense local dual operator of one
+  !> subdomain from a matrix m on its touched dofs (for tests).
+  subroutine sandwich(erow, edof, eval, m, rows, fs)
+    integer(ip), intent(in) :: erow(:), edof(:)
+    real(dp), intent(in) :: eval(:), m(:, :)
+    integer(ip), allocatable, intent(out) :: rows(:)
+    real(dp), allocatable, intent(out) :: fs(:, :)
+    integer(ip) :: i, j, nb
+    nb = size(erow, kind=ip)
+    rows = erow
     allocate (fs(nb, nb))
     do j = 1, nb
-      e2 = this%eoff(s) + j
       do i = 1, nb
-        e1 = this%eoff(s) + i
-        fs(i, j) = this%factor(s)*this%eval(e1)*this%mat(o + int(this%edof(e2) - 1, i8)*n + this%edof(e1))* &
-                   this%eval(e2)
+        fs(i, j) = eval(i)*m(edof(i), edof(j))*eval(j)
       end do
     end do
-  end subroutine local_matrix
+  end subroutine sandwich
 
   !> Bytes one application reads and writes on this rank: every M_c once
   !> (n_c^2 values: dgemm reads the full square), the entries of B twice (16

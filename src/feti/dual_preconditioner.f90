@@ -67,7 +67,7 @@ module dual_preconditioner
   contains
     procedure :: init
     procedure :: apply
-    procedure :: kind
+    procedure :: kind => kind_label
     procedure :: n_applications
     procedure :: row_scaling
     procedure :: factor_bytes
@@ -76,13 +76,13 @@ module dual_preconditioner
 
 contains
 
-  !> `kind`: 'lumped' or 'dirichlet'; `b` and `subs` (K assembled) must
+  !> `variant`: 'lumped' or 'dirichlet'; `b` and `subs` (K assembled) must
   !> outlive the preconditioner; `weights(ls)` = w_s of local subdomain ls.
   !> `classes` (optional): classes of congruent subdomains of `subs`; with
   !> 'lumped' and some class of two members or more, A_s is applied per class.
-  subroutine init(this, kind, b, subs, weights, classes)
+  subroutine init(this, variant, b, subs, weights, classes)
     class(dual_preconditioner_t), intent(inout) :: this
-    character(len=*), intent(in) :: kind
+    character(len=*), intent(in) :: variant
     type(b_operator_t), intent(inout), target :: b
     type(subdomain_t), intent(in), target :: subs(:)
     real(dp), intent(in) :: weights(:)
@@ -92,17 +92,17 @@ contains
     integer(ip) :: ls, e, r(2)
 
     call this%free()
-    if (kind /= 'lumped' .and. kind /= 'dirichlet') &
-      call fatal_error("dual_preconditioner: kind must be 'lumped' or 'dirichlet', got '"//trim(kind)//"'")
+    if (variant /= 'lumped' .and. variant /= 'dirichlet') &
+      call fatal_error("dual_preconditioner: variant must be 'lumped' or 'dirichlet', got '"//trim(variant)//"'")
     if (size(weights) /= size(subs)) call fatal_error('dual_preconditioner: one weight per local subdomain')
     if (any(.not. weights > 0)) call fatal_error('dual_preconditioner: the subdomain weights must be > 0')
-    this%kind_name = kind
+    this%kind_name = variant
     this%b => b
     this%subs => subs
     this%inv_w = 1/weights
     allocate (this%xall(b%n_concat()), this%yall(b%n_concat()))
     call contact_scaling(this, b, size(subs, kind=ip))
-    if (kind == 'dirichlet') then
+    if (variant == 'dirichlet') then
       ! the interface: every dof with an entry of B (gluing, Dirichlet, contact)
       con => b%constraints()
       allocate (on_interface(b%n_concat()))
@@ -115,7 +115,7 @@ contains
       end do
       call this%schur%init(subs, on_interface)
     end if
-    if (kind == 'lumped' .and. present(classes)) then
+    if (variant == 'lumped' .and. present(classes)) then
       if (classes%shared()) call init_shared(this, b, subs, classes)
     end if
   end subroutine init
@@ -248,11 +248,11 @@ contains
   end function row_scaling
 
   !> 'none' before init, else 'lumped' or 'dirichlet'.
-  function kind(this) result(name)
+  function kind_label(this) result(name)
     class(dual_preconditioner_t), intent(in) :: this
     character(len=:), allocatable :: name
     name = trim(this%kind_name)
-  end function kind
+  end function kind_label
 
   integer(i8) function n_applications(this)
     class(dual_preconditioner_t), intent(in) :: this

@@ -29,7 +29,7 @@ module f_operator
   use kplus_set, only: kplus_set_t
   use kplus_shared, only: kplus_shared_t
   use subdomain_classes, only: subdomain_classes_t, find_classes
-  use class_operator, only: class_operator_t
+  use class_operator, only: class_operator_t, sandwich
   use b_operator, only: b_operator_t
   use sorting, only: sort_unique
   use kplus, only: regularized_system
@@ -358,7 +358,7 @@ contains
     integer(ip), allocatable, intent(out) :: rows(:)
     real(dp), allocatable, intent(out) :: fs(:, :)
     real(dp), allocatable :: sf(:, :)
-    integer(ip) :: n, i, j, e1, e2, nb
+    integer(ip) :: n, i, j
     integer(i8) :: o
     if (.not. this%explicit) call fatal_error('f_operator%local_operator: the explicit operators are not built')
     if (this%sharing) then
@@ -379,16 +379,8 @@ contains
         end if
       end do
     end do
-    nb = this%eoff(s + 1) - this%eoff(s)
-    rows = this%erow(this%eoff(s) + 1:this%eoff(s + 1))
-    allocate (fs(nb, nb))
-    do j = 1, nb
-      e2 = this%eoff(s) + j
-      do i = 1, nb
-        e1 = this%eoff(s) + i
-        fs(i, j) = this%eval(e1)*sf(this%edof(e1), this%edof(e2))*this%eval(e2)
-      end do
-    end do
+    call sandwich(this%erow(this%eoff(s) + 1:this%eoff(s + 1)), this%edof(this%eoff(s) + 1:this%eoff(s + 1)), &
+                  this%eval(this%eoff(s) + 1:this%eoff(s + 1)), sf, rows, fs)
   end subroutine local_operator
 
   !> Floating-point operations of the factorization of K^+ (MUMPS's count).
