@@ -254,14 +254,14 @@ contains
     call active_coarse_solve(self%op, self%face_cp, y, c)
   end subroutine face_coefficient
 
-  !> q = F p / s: for p in Ker G (P p = p) the Hessian is P F p / s, and
-  !> P_F kills the rows of G^T that the outer P adds (P_F R_F G^T = 0), so
-  !> P_F q = P_F A p without the two coarse solves of P.
+  !> q = P F p / s = A p for p in Ker G (P p = p, Q p = 0): the Hessian
+  !> without its first projection (one coarse solve instead of two).
   subroutine face_operator(self, p, q)
     class(dual_problem_t), intent(inout) :: self
     real(dp), intent(in) :: p(:)
     real(dp), intent(out) :: q(:)
-    call self%op%apply_f(p, q)
+    call self%op%apply_f(p, self%fpx)
+    call self%apply_projector(self%fpx, q, .false.)
     q(1:self%n) = q(1:self%n)/self%scale
   end subroutine face_operator
 

@@ -12,12 +12,12 @@
 !> 1. start: x_A := l_A, then x_F -= C_F^T (C_F C_F^T)^{-1} C x (C x = 0);
 !> 2. r = -P_F g, g = A x - b, z = P_F M_F^{-1} r (M^{-1} the problem's
 !>    face_precondition on the rows F, or none), standard CG recurrences; the
-!>    gradient g follows each step (g <- g + alpha q, q = face_operator(p),
-!>    P_F q = P_F A p), r is projected anew; at the end g = A x - b afresh
-!>    (one more product);
+!>    gradient g follows each step (g <- g + alpha q, q = face_operator(p)
+!>    = A p), r is projected anew;
 !> 3. stop when the stopping measure of r (the problem's weighted maximum
 !>    with a per-component test, else ||r||) is <= target, or after max_steps
-!>    steps or the Hessian budget.
+!>    steps, or (`aborted`) after abort_check steps or more when the mean
+!>    reduction per step so far would not reach target within max_steps.
 !> The multiplier that makes the face's KKT conditions hold in the least
 !> squares sense is mu = -(C_F C_F^T)^{-1} C_F g_F (returned in the form
 !> eq_apply_t takes, `muhat`), so that g + C^T mu = P_F g on F.
@@ -34,6 +34,9 @@ module face_solve
 
   public :: face_project, free_rows
 
+  !> steps after which a run that would not reach its target within max_steps stops
+  integer(ip), parameter, public :: abort_check = 10
+
   !> Counters and outcome of the last polish.
   type, public :: face_polish_t
     integer(ip) :: n_hessian = 0       !< Hessian products of the last run
@@ -43,6 +46,9 @@ module face_solve
     real(dp) :: measure = 0            !< ... at the end
     logical :: reached = .false.       !< measure <= target
     logical :: breakdown = .false.     !< p^T A p <= 0 or not finite
+    !> stopped early: the rate of the first steps would not reach target within max_steps (x, g, muhat
+    !> are then not a face solution; the caller restores its iterate)
+    logical :: aborted = .false.
     real(dp), allocatable, private :: r(:), z(:), p(:), q(:), w(:)
   contains
     procedure :: run
@@ -108,6 +114,7 @@ contains
     self%n_precondition = 0
     self%reached = .false.
     self%breakdown = .false.
+    self%aborted = .false.
     prec = problem%has_preconditioner()
 
     ! 1. onto the face: x_A = l_A, then C x = 0 by the least squares correction on F
@@ -149,20 +156,24 @@ contains
           self%reached = .true.
           exit
         end if
+        ! after abort_check steps: the mean rate so far, extrapolated, must reach target within max_steps
+        if (self%n_steps >= abort_check) then
+          if (self%measure >= self%measure0) then
+            self%aborted = .true.
+          else
+            self%aborted = self%n_steps*log(target/self%measure0)/log(self%measure/self%measure0) > max_steps
+          end if
+          if (self%aborted) exit
+        end if
         call precondition(self%z)
         rz_new = problem%dot(self%r, self%z)
         self%p = self%z + (rz_new/rz)*self%p
         rz = rz_new
       end do
     end if
-    ! 3. the gradient afresh (face_operator may differ from A off P_F's range)
-    ! and the face multiplier mu = -(C_F C_F^T)^{-1} C_F g_F
-    if (self%n_steps > 0) then
-      call problem%hessian(x, g)
-      self%n_hessian = self%n_hessian + 1
-      g(1:n) = g(1:n) - problem%b(1:n)
-    end if
+    ! 3. the face multiplier mu = -(C_F C_F^T)^{-1} C_F g_F
     call problem%track_reset()
+    if (self%aborted) return
     call face_project(problem, free, g, self%w, muhat)
     muhat = -muhat
 

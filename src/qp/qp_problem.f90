@@ -37,9 +37,9 @@
 !> {y : y_A = 0, C y = 0} reads P_F y = y_F - (eq_apply_t(c))_F for c of y_F
 !> (see face_solve), and `face_free()` releases it. Problems without it never
 !> polish. Two optional shortcuts for vectors of the face (C p = 0, p_A = 0),
-!> used only under P_F: `face_operator(p, q)` with P_F q = P_F A p (default:
-!> the Hessian) and `face_precondition(r, z)` with P_F z an SPD preconditioner
-!> on the face (default: precondition).
+!> `face_operator(p, q)`, q = A p for p on the face (default: the Hessian;
+!> a problem may save work there) and `face_precondition(r, z)`, used only
+!> as P_F z, an SPD preconditioner on the face (default: precondition).
 !>
 !> Stopping test (what the solvers compare with tol): by default the classical
 !> ||g^P|| <= tol ||b|| and ||C x|| <= tol ||b|| in the 2-norm. A problem that
@@ -317,7 +317,7 @@ contains
     c = 0
   end subroutine default_face_coefficient
 
-  !> q with P_F q = P_F A p for p on the face: the Hessian by default.
+  !> q = A p for p on the face (C p = 0): the Hessian by default.
   subroutine default_face_operator(self, p, q)
     class(qp_problem_t), intent(inout) :: self
     real(dp), intent(in) :: p(:)

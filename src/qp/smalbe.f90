@@ -79,7 +79,9 @@
 !>    solves: a face solve whose x leaves a bound on a free row is projected
 !>    and the new face solved at once); each at most smalbe_polish_steps and
 !>    at most max(smalbe_polish_min_steps, the products spent so far)
-!>    CG steps, to smalbe_polish_target times the outer test's bound.
+!>    CG steps, to smalbe_polish_target times the outer test's bound; a
+!>    face solve whose first steps are too slow for that budget is given up
+!>    and the iterate restored (face_solve, `aborted`).
 !>    Timer 'polish' (a part of 'solve': the face matrix's assembly and
 !>    factorization, the CG steps with their products).
 !>
@@ -171,7 +173,7 @@ module smalbe
   integer(ip), parameter, public :: smalbe_polish_rounds = 3
   integer(ip), parameter, public :: smalbe_polish_steps = 500
   integer(ip), parameter, public :: smalbe_polish_min_steps = 30
-  real(dp), parameter, public :: smalbe_polish_target = 0.1_dp
+  real(dp), parameter, public :: smalbe_polish_target = 0.5_dp
 
   !> The SMALBE-M solver with its inner MPRGP. All counters are totals of the
   !> last solve (components, for report.json).
@@ -198,6 +200,7 @@ module smalbe
     integer(ip) :: n_polish_hessian = 0        !< Hessian products of those (included in n_hessian)
     integer(ip) :: n_polish_steps = 0          !< their CG steps
     integer(ip) :: n_polish_exact = 0          !< polishes after which the outer test held at once
+    integer(ip) :: n_polish_aborted = 0        !< face solves given up (too slow), the iterate restored
     ! results of the last solve
     real(dp), allocatable :: muhat(:)          !< final multiplier, hat form (C^T mu = eq_apply_t(muhat))
     real(dp) :: cnorm = 0                      !< ||C x|| at the returned x
@@ -234,6 +237,7 @@ module smalbe
     real(dp), allocatable :: rho_history(:)    !< the penalty of outer iteration k's inner solve
     real(dp), allocatable, private :: b_lin(:), ct_mu(:), ct_new(:), x_prev(:), g_prev(:)
     logical, allocatable, private :: free_now(:), free_prev(:)
+    real(dp), allocatable, private :: muhat_prev(:)     !< the multiplier before a polish
     type(smalbe_inner_stop_t), private :: rule
   contains
     procedure :: init => smalbe_init
@@ -398,6 +402,7 @@ contains
     if (allocated(self%g_prev)) deallocate (self%g_prev)
     if (allocated(self%rule%z)) deallocate (self%rule%z)
     if (allocated(self%free_now)) deallocate (self%free_now, self%free_prev)
+    if (allocated(self%muhat_prev)) deallocate (self%muhat_prev)
     self%status = qp_status_not_run
     self%message = 'not run'
   end subroutine smalbe_free
@@ -460,6 +465,7 @@ contains
     call ensure_size(self%g_prev, n)
     call ensure_size(self%muhat, m)
     call ensure_size(self%rule%z, m)
+    call ensure_size(self%muhat_prev, m)
     polishing = self%polish_window > 0 .and. problem%has_face_solver()
     if (allocated(self%free_now)) deallocate (self%free_now, self%free_prev)
     allocate (self%free_now(n), self%free_prev(n))
@@ -732,6 +738,10 @@ contains
       ! a face that CG solves slowly (inner-bound cases) costs at most twice the products
       budget = min(smalbe_polish_steps, max(smalbe_polish_min_steps, self%n_hessian), &
                    self%max_hessian - self%n_hessian - 2)
+      ! the pair to go back to when the face solve gives up (too slow for its budget)
+      self%x_prev(1:n) = x(1:n)
+      self%g_prev(1:n) = self%gradient(1:n)
+      self%muhat_prev = self%muhat
       call problem%face_init(self%free_now)
       call self%polish%run(problem, self%free_now, x, self%gradient, self%muhat, &
                            smalbe_polish_target*self%tol_gp, self%per_component, budget)
@@ -741,6 +751,20 @@ contains
       self%n_polish_hessian = self%n_polish_hessian + self%polish%n_hessian
       self%n_polish_steps = self%n_polish_steps + self%polish%n_steps
       self%n_preconditioner = self%n_preconditioner + self%polish%n_precondition
+      if (self%polish%aborted) then
+        x(1:n) = self%x_prev(1:n)
+        self%gradient(1:n) = self%g_prev(1:n)
+        self%muhat = self%muhat_prev
+        call problem%track_reset()
+        self%n_polish_aborted = self%n_polish_aborted + 1
+        if (self%monitor) then
+          write (buf, '(a,i0,a,i0,a,i0,a,es9.2,a,es9.2,a)') 'polish after outer ', outer, ': given up after ', &
+            self%polish%n_steps, ' CG steps (', self%polish%n_hessian, ' products; residual ', &
+            self%polish%measure0, ' -> ', self%polish%measure, ' too slow for its budget), iterate restored'
+          call log_message(trim(buf))
+        end if
+        exit
+      end if
       ! the gradient of the Lagrangian with the face multiplier
       call problem%eq_apply_t(self%muhat, self%ct_mu)
       do i = 1, n
@@ -860,6 +884,7 @@ contains
     self%n_polish_hessian = 0
     self%n_polish_steps = 0
     self%n_polish_exact = 0
+    self%n_polish_aborted = 0
     self%cnorm_history = [real(dp) ::]
     self%hessian_history = [integer(ip) ::]
     self%rho_history = [real(dp) ::]
@@ -917,9 +942,10 @@ contains
       call log_message(trim(buf)//')')
     end if
     if (self%n_polish > 0) then
-      write (buf, '(a,i0,a,i0,a,i0,a,i0,a,i0,a)') '  polish ', self%n_polish, ' times (', self%n_polish_rounds, &
+      write (buf, '(a,i0,a,i0,a,i0,a,i0,a,i0,a,i0,a)') '  polish ', self%n_polish, ' times (', self%n_polish_rounds, &
         ' face solves, ', self%n_polish_steps, &
-        ' CG steps, ', self%n_polish_hessian, ' Hessian multiplications; accepted at once ', self%n_polish_exact, ')'
+        ' CG steps, ', self%n_polish_hessian, ' Hessian multiplications; accepted at once ', self%n_polish_exact, &
+        ', given up ', self%n_polish_aborted, ')'
       call log_message(buf)
     end if
     if (self%n_norm_updates > 0) then
