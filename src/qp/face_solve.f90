@@ -17,7 +17,9 @@
 !> 3. stop when the stopping measure of r (the problem's weighted maximum
 !>    with a per-component test, else ||r||) is <= target, or after max_steps
 !>    steps, or (`aborted`) after abort_check steps or more when the mean
-!>    reduction per step so far would not reach target within max_steps.
+!>    reduction per step so far would not reach target within abort_factor
+!>    times max_steps (CG usually speeds up; a run stopped by max_steps
+!>    keeps its iterate, an aborted one is given up).
 !> The multiplier that makes the face's KKT conditions hold in the least
 !> squares sense is mu = -(C_F C_F^T)^{-1} C_F g_F (returned in the form
 !> eq_apply_t takes, `muhat`), so that g + C^T mu = P_F g on F.
@@ -36,6 +38,8 @@ module face_solve
 
   !> steps after which a run that would not reach its target within max_steps stops
   integer(ip), parameter, public :: abort_check = 10
+  !> ... would need more than abort_factor * max_steps at its mean rate so far (CG speeds up later)
+  real(dp), parameter, public :: abort_factor = 2
 
   !> Counters and outcome of the last polish.
   type, public :: face_polish_t
@@ -161,7 +165,8 @@ contains
           if (self%measure >= self%measure0) then
             self%aborted = .true.
           else
-            self%aborted = self%n_steps*log(target/self%measure0)/log(self%measure/self%measure0) > max_steps
+            self%aborted = self%n_steps*log(target/self%measure0)/log(self%measure/self%measure0) > &
+                           abort_factor*max_steps
           end if
           if (self%aborted) exit
         end if

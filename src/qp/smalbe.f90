@@ -444,7 +444,7 @@ contains
     character(len=qp_message_len) :: reason, buf
     real(dp) :: scale, lagr, change, m_now, q, s(2), hi(2), lo(2), l_shift, rho_old
     integer(ip) :: n, m, outer, i, n_idle, last_raise, w, n_stable, changes, local
-    logical :: gradient_given, failed, raise, polishing, polished_set, after_polish
+    logical :: gradient_given, failed, raise, polishing, polished_set, after_polish, restored
     integer :: ierr
 
     call reset_counters(self)
@@ -700,12 +700,14 @@ contains
       ! 6. polish: the exact solve on a face that has not changed for polish_window outer iterations
       if (polishing .and. n_stable >= self%polish_window .and. .not. polished_set .and. &
           self%n_polish < smalbe_polish_max .and. self%max_hessian - self%n_hessian > 2) then
-        call polish_step(self, problem, x, outer)
+        call polish_step(self, problem, x, outer, restored)
         self%free_prev = self%free_now
         n_stable = 0
         polished_set = .true.
-        after_polish = .true.
-        l_shift = 0
+        if (.not. restored) then
+          after_polish = .true.
+          l_shift = 0
+        end if
       end if
     end do
     self%n_eq_residual = self%rule%n_eq_residual
@@ -717,17 +719,19 @@ contains
   !> (x, muhat, gradient) handed back to the outer loop. When free rows end
   !> below their bound, x is projected and the new face solved at once (a
   !> primal active-set step), up to smalbe_polish_max polishes. Collective.
-  subroutine polish_step(self, problem, x, outer)
+  subroutine polish_step(self, problem, x, outer, restored)
     class(smalbe_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
     real(dp), intent(inout) :: x(:)
     integer(ip), intent(in) :: outer
+    logical, intent(out) :: restored      !< the first face solve was given up: x, mu as before
     integer(ip) :: n, i, budget, counts(2), local(2), rounds
     integer :: ierr
     real(dp) :: wi
     logical :: again
     character(len=300) :: buf
     call timer_start('polish')
+    restored = .false.
     n = problem%n
     again = .true.
     self%n_polish = self%n_polish + 1
@@ -756,6 +760,7 @@ contains
         self%gradient(1:n) = self%g_prev(1:n)
         self%muhat = self%muhat_prev
         call problem%track_reset()
+        restored = rounds == 1
         self%n_polish_aborted = self%n_polish_aborted + 1
         if (self%monitor) then
           write (buf, '(a,i0,a,i0,a,i0,a,es9.2,a,es9.2,a)') 'polish after outer ', outer, ': given up after ', &
