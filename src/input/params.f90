@@ -82,8 +82,9 @@ module params
     !> > 0: the first raise only on a stall (contraction worse than this over rho_window), later ones per iteration
     real(dp) :: rho_stall = 0.95_dp
     !> > 0: SMALBE's polish (exact face solve) once the active set has not
-    !> changed for this many outer iterations; 0: off (docs/INPUT.md)
-    integer(ip) :: polish_window = 0
+    !> changed for this many outer iterations; 0: off (docs/INPUT.md; 1 by
+    !> docs/RESULTS.md "Polish: the exact face solve")
+    integer(ip) :: polish_window = 1
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'

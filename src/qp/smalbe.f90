@@ -65,7 +65,8 @@
 !> "not converged" status and a message, as do NaN/Inf (qp_status_not_finite).
 !>
 !> 6. optional polish (polish_window > 0, a problem with a face solver,
-!>    qp_problem): once the active set (the x_i at their bound) has not
+!>    qp_problem; off in smalbe_settings_t, `&solver polish_window` is 1 by
+!>    default, docs/RESULTS.md "Polish: the exact face solve"): once the active set (the x_i at their bound) has not
 !>    changed for polish_window outer iterations whose inner solve made a
 !>    step, the equality constrained QP
 !>    on that face (x_A = l_A, C x = 0) is solved by PCPG (module face_solve)
