@@ -90,6 +90,7 @@ module dual_problem
     procedure :: precondition
     procedure :: preconditioner_name
     procedure :: has_face_solver
+    procedure :: face_always_regular
     procedure :: face_init
     procedure :: face_coefficient
     procedure :: face_free
@@ -234,6 +235,14 @@ contains
     class(dual_problem_t), intent(in) :: self
     has_face_solver = associated(self%op)
   end function has_face_solver
+
+  !> The equality rows (gluing, Dirichlet) give a regular G_E G_E^T when the
+  !> Dirichlet rows alone fix every rigid body motion (feti_t's test).
+  logical function face_always_regular(self)
+    class(dual_problem_t), intent(in) :: self
+    face_always_regular = .false.
+    if (associated(self%op)) face_always_regular = self%op%dirichlet_fixes_rigid_modes()
+  end function face_always_regular
 
   !> Assemble and factorize G_F G_F^T over the rows in `free` (the equality
   !> rows are always free: their lower bound is no_lower_bound). Collective.

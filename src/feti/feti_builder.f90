@@ -6,7 +6,7 @@
 submodule(feti_operators) feti_builder
   use timers, only: timer_start, timer_stop
   use memory_marks, only: memory_mark
-  use kinds, only: MPI_INT_I8, MPI_REAL_DP
+  use kinds, only: MPI_INT_I8, MPI_INT_IP, MPI_REAL_DP
   use decomposition, only: build_decomposition
   use subdomain, only: build_subdomain
   use clusters, only: is_hybrid, unit_params, build_cluster
@@ -15,6 +15,9 @@ submodule(feti_operators) feti_builder
   use mpi_f08, only: MPI_Comm_size, MPI_IN_PLACE, MPI_INTEGER, MPI_MIN
   use errors, only: collective_error, exit_input_error
   use ritz_values, only: tridiagonal_extremes
+  use constraints, only: row_dirichlet
+  use lapack_interfaces, only: dsyev
+  use mpi_f08, only: MPI_MAX
   implicit none
 
 contains
@@ -105,6 +108,7 @@ contains
     call memory_mark('explicit F')
 
     call timer_start('coarse setup')
+    call dirichlet_rigid_test(this)
     call this%proj%init(this%dec, this%b, comm, p%solver)
     call timer_stop('coarse setup')
     call memory_mark('coarse setup')
@@ -293,4 +297,63 @@ contains
       ' iterations)'
     call log_message(line)
   end subroutine estimate_norm_pfp
+
+  !> this%dirichlet_holds: the Dirichlet rows alone fix every rigid body
+  !> motion of the body. With r_i the values of the 6 rigid body motions at
+  !> Dirichlet row i (its node and component; coordinates relative to the
+  !> centre of the Dirichlet nodes' bounding box, divided by its size), the
+  !> Gram matrix sum_i r_i r_i^T has full rank: lambda_min > sqrt(eps)
+  !> lambda_max (a rank test; a motion the rows leave free gives 0 up to
+  !> rounding). The body is glued into one piece by the gluing rows, so then
+  !> no coarse vector has G^T y = 0 on the equality rows: G_E G_E^T and every
+  !> G_F G_F^T over more rows are regular. Collective.
+  subroutine dirichlet_rigid_test(this)
+    class(feti_t), intent(inout) :: this
+    integer(ip), allocatable :: kinds(:)
+    integer(i8), allocatable :: keys(:)
+    real(dp), allocatable :: x(:, :)
+    real(dp) :: gram(6, 6), r(6), box(6), centre(3), size3, d(3), w(6), work(64)
+    integer(ip) :: i, comp, nrows
+    integer :: ierr, info
+    this%dirichlet_holds = .false.
+    kinds = this%b%row_kind()
+    keys = this%b%row_keys()
+    x = this%b%row_coordinates(this%subs)
+    nrows = count(kinds == row_dirichlet, kind=ip)
+    call MPI_Allreduce(MPI_IN_PLACE, nrows, 1, MPI_INT_IP, MPI_SUM, this%communicator, ierr)
+    if (nrows < 6) return
+    box(1:3) = -huge(1.0_dp)       ! max of -x, then max of x
+    box(4:6) = -huge(1.0_dp)
+    do i = 1, size(kinds, kind=ip)
+      if (kinds(i) /= row_dirichlet) cycle
+      box(1:3) = max(box(1:3), -x(:, i))
+      box(4:6) = max(box(4:6), x(:, i))
+    end do
+    call MPI_Allreduce(MPI_IN_PLACE, box, 6, MPI_REAL_DP, MPI_MAX, this%communicator, ierr)
+    centre = 0.5_dp*(box(4:6) - box(1:3))
+    size3 = max(maxval(box(4:6) + box(1:3)), tiny(1.0_dp))
+    gram = 0
+    do i = 1, size(kinds, kind=ip)
+      if (kinds(i) /= row_dirichlet) cycle
+      comp = int(mod(keys(i)/32, 3_i8), ip) + 1        ! constraints::row_key
+      d = (x(:, i) - centre)/size3
+      r = 0
+      r(comp) = 1
+      select case (comp)          ! rotations about x, y, z: (0, -z, y), (z, 0, -x), (-y, x, 0)
+      case (1)
+        r(5) = d(3)
+        r(6) = -d(2)
+      case (2)
+        r(4) = -d(3)
+        r(6) = d(1)
+      case default
+        r(4) = d(2)
+        r(5) = -d(1)
+      end select
+      gram = gram + spread(r, 2, 6)*spread(r, 1, 6)
+    end do
+    call MPI_Allreduce(MPI_IN_PLACE, gram, 36, MPI_REAL_DP, MPI_SUM, this%communicator, ierr)
+    call dsyev('N', 'U', 6, gram, 6, w, work, size(work), info)
+    if (info == 0) this%dirichlet_holds = w(6) > 0 .and. w(1) > sqrt(epsilon(1.0_dp))*w(6)
+  end subroutine dirichlet_rigid_test
 end submodule feti_builder

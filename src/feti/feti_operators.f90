@@ -56,6 +56,8 @@ module feti_operators
     logical, allocatable :: contact(:)           !< (n_own) the row is a contact row
     real(dp), allocatable :: e(:)                !< (6*nlocal) R^T f
     real(dp) :: pfp_norm = 0                     !< estimate of ||P F P||
+    !> the Dirichlet rows alone fix every rigid body motion of the body (setup, dirichlet_rigid_test)
+    logical :: dirichlet_holds = .false.
     real(dp), allocatable :: xall(:)             !< work: concatenated primal vector
   contains
     procedure :: setup
@@ -108,6 +110,7 @@ module feti_operators
     procedure :: setup_flops
     procedure :: coarse_solves
     procedure :: coarse_factor
+    procedure :: dirichlet_fixes_rigid_modes
     procedure :: free
   end type feti_t
 
@@ -496,6 +499,14 @@ contains
     type(coarse_problem_t), pointer :: cp
     cp => this%proj%coarse_problem()
   end function coarse_factor
+
+  !> True when the Dirichlet rows alone fix every rigid body motion of the
+  !> glued body (feti_builder's dirichlet_rigid_test): then every free-row
+  !> coarse matrix G_F G_F^T (equality rows plus any contact rows) is regular.
+  logical function dirichlet_fixes_rigid_modes(this)
+    class(feti_t), intent(in) :: this
+    dirichlet_fixes_rigid_modes = this%dirichlet_holds
+  end function dirichlet_fixes_rigid_modes
 
   subroutine free(this)
     class(feti_t), intent(inout) :: this

@@ -125,6 +125,7 @@ module qp_problem
     procedure :: has_preconditioner => default_has_preconditioner
     procedure :: precondition => default_precondition
     procedure :: has_face_solver => default_has_face_solver
+    procedure :: face_always_regular => default_face_always_regular
     procedure :: face_init => default_face_init
     procedure :: face_coefficient => default_face_coefficient
     procedure :: face_free => default_face_free
@@ -296,6 +297,17 @@ contains
     default_has_face_solver = .false.
     if (self%n < 0) default_has_face_solver = .true.   ! never: keeps self referenced
   end function default_has_face_solver
+
+  !> False: C_F C_F^T may be singular when every bounded row is at its bound
+  !> (the equality rows alone need not determine the multipliers), so SMALBE
+  !> does not polish that face. True where the problem knows that the
+  !> equality rows alone give a regular C_E C_E^T (then every C_F C_F^T is
+  !> regular). Local, no communication.
+  logical function default_face_always_regular(self)
+    class(qp_problem_t), intent(in) :: self
+    default_face_always_regular = .false.
+    if (self%n < 0) default_face_always_regular = .true.   ! never: keeps self referenced
+  end function default_face_always_regular
 
   !> Prepare C_F C_F^T for the free rows `free` (local mask). Collective.
   subroutine default_face_init(self, free)

@@ -699,13 +699,16 @@ contains
       end if
 
       ! 6. polish: the exact solve on a face that has not changed for polish_window outer iterations
-      ! (not when every bounded row is at its bound: then the equality rows alone
-      ! may leave C_F C_F^T singular, e.g. a body held by its contact only)
+      ! (not when every bounded row is at its bound, unless the problem knows the equality rows
+      ! alone to give a regular C_E C_E^T: else C_F C_F^T may be singular, e.g. a body held by
+      ! its contact only)
       if (polishing .and. n_stable >= self%polish_window .and. .not. polished_set .and. &
           self%n_polish < smalbe_polish_max .and. self%max_hessian - self%n_hessian > 2) then
         local = count(self%free_now .and. problem%lower(1:n) > no_lower_bound, kind=ip)
         call MPI_Allreduce(local, changes, 1, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
-        if (changes == 0 .and. problem%count_at_bound(x) > 0) polished_set = .true.
+        if (changes == 0 .and. problem%count_at_bound(x) > 0) then
+          if (.not. problem%face_always_regular()) polished_set = .true.
+        end if
       end if
       if (polishing .and. n_stable >= self%polish_window .and. .not. polished_set .and. &
           self%n_polish < smalbe_polish_max .and. self%max_hessian - self%n_hessian > 2) then
