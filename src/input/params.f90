@@ -652,9 +652,13 @@ contains
         call fail('material', 'contrast', 'must be in [1, 1e12]', reals([m%contrast]))
     end associate
     associate (b => p%boundary)
-      if (.not. (b%top_dirichlet .or. b%symmetry_x0 .or. b%symmetry_y0 .or. p%obstacle%shape /= 'none')) &
+      ! frictionless contact holds u_z only: without the top face, the symmetry planes must hold
+      ! the x and y translations and the rotation about z, and an obstacle the z translation
+      if (.not. (b%top_dirichlet .or. (b%symmetry_x0 .and. b%symmetry_y0 .and. p%obstacle%shape /= 'none'))) &
         call fail('boundary', 'top_dirichlet', &
-                  'the body must be held: set top_dirichlet, a symmetry plane or an obstacle', 'F')
+                  'the body must be held against every rigid motion: set top_dirichlet, or both '// &
+                  'symmetry_x0 and symmetry_y0 together with an &obstacle shape (the frictionless '// &
+                  'contact holds only the z direction)', 'F')
     end associate
     associate (o => p%obstacle)
       if (.not. one_of(o%shape, [character(len=8) :: 'sphere', 'plane', 'none'])) &
