@@ -31,6 +31,7 @@
 module face_solve
   use kinds, only: dp, ip
   use qp_problem, only: qp_problem_t, no_lower_bound
+  use mprgp, only: ensure_size
   implicit none
   private
 
@@ -54,6 +55,7 @@ module face_solve
     !> are then not a face solution; the caller restores its iterate)
     logical :: aborted = .false.
     real(dp), allocatable, private :: r(:), z(:), p(:), q(:), w(:)
+    real(dp), allocatable, private :: cz(:)   !< coefficients of P_F z (muhat keeps those of g)
   contains
     procedure :: run
   end type face_polish_t
@@ -108,11 +110,12 @@ contains
     logical :: prec
 
     n = problem%n
-    call ensure(self%r, n)
-    call ensure(self%z, n)
-    call ensure(self%p, n)
-    call ensure(self%q, n)
-    call ensure(self%w, n)
+    call ensure_size(self%r, n)
+    call ensure_size(self%z, n)
+    call ensure_size(self%p, n)
+    call ensure_size(self%q, n)
+    call ensure_size(self%w, n)
+    call ensure_size(self%cz, size(muhat, kind=ip))
     self%n_hessian = 0
     self%n_steps = 0
     self%n_precondition = 0
@@ -176,10 +179,10 @@ contains
         rz = rz_new
       end do
     end if
-    ! 3. the face multiplier mu = -(C_F C_F^T)^{-1} C_F g_F
+    ! 3. the face multiplier mu = -(C_F C_F^T)^{-1} C_F g_F: muhat holds the coefficients of
+    ! the last projection of g, made after g last changed (the preconditioner's go to cz)
     call problem%track_reset()
     if (self%aborted) return
-    call face_project(problem, free, g, self%w, muhat)
     muhat = -muhat
 
   contains
@@ -203,16 +206,8 @@ contains
       self%w = merge(self%r, 0.0_dp, free(1:n))
       call problem%face_precondition(self%w, self%q)
       self%n_precondition = self%n_precondition + 1
-      call face_project(problem, free, self%q, z, muhat)
+      call face_project(problem, free, self%q, z, self%cz)
     end subroutine precondition
   end subroutine run
 
-  subroutine ensure(v, n)
-    real(dp), allocatable, intent(inout) :: v(:)
-    integer(ip), intent(in) :: n
-    if (allocated(v)) then
-      if (size(v) /= n) deallocate (v)
-    end if
-    if (.not. allocated(v)) allocate (v(n))
-  end subroutine ensure
 end module face_solve
