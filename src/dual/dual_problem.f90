@@ -67,8 +67,9 @@ module dual_problem
     real(dp) :: prec_q_weight = 1              !< sigma: M_A^{-1} A = sigma on Im Q
     real(dp), allocatable, private :: wp(:), wq(:), wm(:)
     !> G_F G_F^T of SMALBE's face solve (F: equality rows and free contact
-    !> rows), assembled and factorized as the standard reconstruction does
-    type(coarse_problem_t), private :: face_cp
+    !> rows): the FETI operators' reusable masked instance (one MUMPS analysis
+    !> per run, a numerical factorization per face; feti_t%masked_coarse)
+    type(coarse_problem_t), pointer, private :: face_cp => null()
     logical, private :: face_ready = .false.
   contains
     procedure :: init
@@ -245,12 +246,13 @@ contains
   end function face_always_regular
 
   !> Assemble and factorize G_F G_F^T over the rows in `free` (the equality
-  !> rows are always free: their lower bound is no_lower_bound). Collective.
+  !> rows are always free: their lower bound is no_lower_bound), reusing the
+  !> MUMPS analysis of the first face. Collective.
   subroutine face_init(self, free)
     class(dual_problem_t), intent(inout) :: self
     logical, intent(in) :: free(:)
     call self%face_free()
-    call self%op%init_active_coarse(self%face_cp, free)
+    self%face_cp => self%op%masked_coarse(free, low_rank=.true.)
     self%face_ready = .true.
   end subroutine face_init
 
@@ -288,9 +290,11 @@ contains
     z(1:self%n) = self%scale*z(1:self%n)
   end subroutine face_precondition
 
+  !> The face matrix is no longer used (its instance stays with the FETI
+  !> operators, for the next face and the standard reconstruction).
   subroutine face_free(self)
     class(dual_problem_t), intent(inout) :: self
-    if (self%face_ready) call self%face_cp%free()
+    self%face_cp => null()
     self%face_ready = .false.
   end subroutine face_free
 

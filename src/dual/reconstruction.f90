@@ -111,7 +111,9 @@ contains
   end subroutine active_contact_mask
 
   !> alpha_bar = (G_A G_A^T)^{-1} G_A g_A (Eq. 10), assembling and factorizing
-  !> G_A G_A^T as a conventional code does. The new matrix is freed again.
+  !> G_A G_A^T as a conventional code does, in the FETI operators' reusable
+  !> masked instance (feti_t%masked_coarse): its MUMPS analysis is that of
+  !> SMALBE's first face when a polish ran, else made here.
   subroutine alpha_standard(op, lambda, g, active_tol, alpha_bar, cost)
     type(feti_t), intent(inout) :: op
     real(dp), intent(in) :: lambda(:), g(:)
@@ -120,21 +122,20 @@ contains
     type(standard_cost_t), intent(out) :: cost
     logical, allocatable :: mask(:)
     real(dp), allocatable :: ga(:)
-    type(coarse_problem_t) :: active_cp
+    type(coarse_problem_t), pointer :: active_cp
     real(dp) :: t0
 
     call timer_start('rec standard')
     allocate (mask(op%n_own()), ga(op%n_own()))
     t0 = MPI_Wtime()
     call active_contact_mask(op, lambda, active_tol, mask, cost%active_rows)
-    call op%init_active_coarse(active_cp, mask)
+    active_cp => op%masked_coarse(mask, low_rank=.false.)
     cost%factorization = active_cp%factorization_seconds()
     cost%assembly = MPI_Wtime() - t0 - cost%factorization
     t0 = MPI_Wtime()
     ga = merge(g, 0.0_dp, mask)
     call active_coarse_solve(op, active_cp, ga, alpha_bar)
     cost%solve = MPI_Wtime() - t0
-    call active_cp%free()
     call timer_stop('rec standard')
     cost%total = cost%assembly + cost%factorization + cost%solve
   end subroutine alpha_standard

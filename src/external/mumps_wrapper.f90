@@ -11,6 +11,8 @@
 !>     call m%set_distributed(n, irn_loc, jcn_loc, a_loc)  ! every rank
 !>     call m%set_ordering('amd')                    ! or ('metis', perm) ...
 !>     call m%factorize()                            ! JOB = 1 then JOB = 2
+!>     call m%refactorize(a)                         ! JOB = 2 only: new values, same pattern
+!>                                                   ! (after factorize(keep_pattern=.true.))
 !>     call m%solve(rhs)                             ! JOB = 3, rhs on the host
 !>     call m%free()                                 ! JOB = -2
 !>
@@ -24,6 +26,12 @@
 !>   them; they are released after the factorization (no iterative refinement
 !>   nor error analysis is used, so the solve phase never reads them). A new
 !>   set_* + factorize refactorizes (a new analysis each time).
+!>   `factorize(keep_pattern=.true.)` keeps them instead, and `refactorize(a)`
+!>   then factorizes new values on the same pattern (same entry order) with
+!>   JOB = 2 alone: MUMPS keeps the analysis (ordering, symbolic
+!>   factorization, mapping) until the next JOB = 1 or -2, and its
+!>   factorization phase reads the matrix (IRN, JCN, A on the host, or
+!>   IRN_loc, JCN_loc, A_loc on every rank) anew.
 !> - A factorization that runs out of MUMPS's estimated workspace (-8, -9, -17,
 !>   -20) is retried with a larger ICNTL(14), as the MUMPS guide advises.
 !> - Every MUMPS error (INFOG(1) < 0) is fatal: `fatal_error` with INFOG(1),
@@ -45,7 +53,7 @@
 module mumps_wrapper
   use kinds, only: dp, ip, i8
   use errors, only: fatal_error
-  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size
+  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Allreduce, MPI_INTEGER, MPI_MAX, MPI_Wtime
   implicit none
   private
 
@@ -72,6 +80,8 @@ module mumps_wrapper
     integer :: n = 0                        !< order of the matrix
     logical :: spd = .false.
     logical :: factorized = .false.
+    logical :: pattern_kept = .false.       !< analysed, the matrix arrays kept for refactorize
+    real(dp) :: seconds(2) = 0              !< of the last factorize / refactorize: analysis, numeric factorization
     ! Arrays owned by the wrapper; MUMPS's pointers point at them.
     integer, pointer, contiguous :: irn(:) => null(), jcn(:) => null(), perm(:) => null()
     real(dp), pointer, contiguous :: a(:) => null()
@@ -89,6 +99,8 @@ module mumps_wrapper
     procedure :: set_low_rank
     procedure :: set_out_of_core
     procedure :: factorize
+    procedure :: refactorize
+    procedure :: phase_seconds
     procedure, private :: solve_matrix
     procedure, private :: solve_vector
     generic :: solve => solve_matrix, solve_vector
@@ -164,6 +176,7 @@ contains
     call require_active(this, 'set_centralized')
     this%n = n
     this%factorized = .false.
+    this%pattern_kept = .false.
     if (this%rank /= 0) return
     if (size(jcn) /= size(irn) .or. size(a) /= size(irn)) &
       call fatal_error('mumps_wrapper: set_centralized: irn, jcn and a differ in size')
@@ -195,6 +208,7 @@ contains
       call fatal_error('mumps_wrapper: set_distributed: irn_loc, jcn_loc and a_loc differ in size')
     this%n = n
     this%factorized = .false.
+    this%pattern_kept = .false.
     call release_matrix(this)
     allocate (this%irn, source=irn_loc)
     allocate (this%jcn, source=jcn_loc)
@@ -336,29 +350,63 @@ contains
 
   !> Analysis (JOB = 1) and numerical factorization (JOB = 2). Collective.
   !> The wrapper's copy of the matrix and of the pivot order are released
-  !> afterwards.
-  subroutine factorize(this)
+  !> afterwards, unless `keep_pattern`: then the matrix stays (MUMPS's
+  !> factorization phase reads it again) and `refactorize` can follow.
+  subroutine factorize(this, keep_pattern)
     class(mumps_t), intent(inout) :: this
-    integer :: attempt, status
+    logical, intent(in), optional :: keep_pattern
+    real(dp) :: t0
 
     call require_active(this, 'factorize')
     this%factorized = .false.
+    this%pattern_kept = .false.
+    t0 = wall_seconds()
     call run(this, job_analyse, 'analysis')
-    do attempt = 0, max_workspace_retries
-      this%id%JOB = job_factorize
-      call dmumps(this%id)
-      status = this%id%INFOG(1)
-      if (status >= 0) exit
-      if (attempt == max_workspace_retries .or. .not. any(status == [-8, -9, -17, -20])) &
-        call report_error(this, 'factorization')
-      ! out of the workspace estimated by the analysis: more relaxation, again
-      if (this%rank == 0) this%id%ICNTL(14) = max(2*this%id%ICNTL(14), this%id%ICNTL(14) + 20)
-    end do
-    this%factorized = .true.
-    call release_matrix(this)
+    this%seconds(1) = wall_seconds() - t0
+    call numeric_factorization(this)
     if (associated(this%perm)) deallocate (this%perm)
     nullify (this%id%PERM_IN)
+    if (present(keep_pattern)) this%pattern_kept = keep_pattern
+    if (.not. this%pattern_kept) call release_matrix(this)
   end subroutine factorize
+
+  !> A new numerical factorization (JOB = 2 alone) of the matrix with the
+  !> values `a` on the pattern of the last factorize(keep_pattern=.true.):
+  !> `a` holds this rank's entries in the order of the irn/jcn given then
+  !> (the host's for centralized input; other ranks of a centralized
+  !> instance pass an empty array). The analysis (pivot order, symbolic
+  !> factorization) is reused; the factors are those of a fresh factorize of
+  !> the same matrix up to rounding. Collective.
+  subroutine refactorize(this, a)
+    class(mumps_t), intent(inout) :: this
+    real(dp), intent(in) :: a(:)
+    integer :: ierr, bad, any_bad
+
+    call require_active(this, 'refactorize')
+    if (.not. this%pattern_kept) &
+      call fatal_error('mumps_wrapper: refactorize needs a factorize(keep_pattern=.true.) before')
+    bad = 0
+    if (associated(this%a)) then
+      if (size(a) /= size(this%a)) bad = 1
+    else if (size(a) /= 0) then
+      bad = 1
+    end if
+    ! every rank must know (JOB = 2 is collective)
+    call MPI_Allreduce(bad, any_bad, 1, MPI_INTEGER, MPI_MAX, this%comm, ierr)
+    if (any_bad /= 0) call fatal_error('mumps_wrapper: refactorize: the values differ in number from the pattern')
+    if (associated(this%a)) this%a(:) = a
+    this%factorized = .false.
+    this%seconds(1) = 0
+    call numeric_factorization(this)
+  end subroutine refactorize
+
+  !> Seconds of the last factorize or refactorize on this rank: analysis
+  !> (0 after refactorize) and numerical factorization.
+  function phase_seconds(this) result(seconds)
+    class(mumps_t), intent(in) :: this
+    real(dp) :: seconds(2)
+    seconds = this%seconds
+  end function phase_seconds
 
   !> Solve A X = B for the columns of `rhs` (n x nrhs), centralized on the
   !> host; the solution overwrites `rhs` on the host. Collective: the other
@@ -489,6 +537,8 @@ contains
     this%rank = -1
     this%nranks = 0
     this%factorized = .false.
+    this%pattern_kept = .false.
+    this%seconds = 0
   end subroutine free
 
   ! ---------------------------------------------------------------- private
@@ -498,6 +548,28 @@ contains
     character(len=*), intent(in) :: what
     if (.not. associated(this%id)) call fatal_error('mumps_wrapper: '//what//' before init')
   end subroutine require_active
+
+  !> JOB = 2, retried with a larger ICNTL(14) when MUMPS runs out of the
+  !> workspace its analysis estimated (-8, -9, -17, -20), as the MUMPS guide
+  !> advises. Collective.
+  subroutine numeric_factorization(this)
+    class(mumps_t), intent(inout) :: this
+    integer :: attempt, status
+    real(dp) :: t0
+    t0 = wall_seconds()
+    do attempt = 0, max_workspace_retries
+      this%id%JOB = job_factorize
+      call dmumps(this%id)
+      status = this%id%INFOG(1)
+      if (status >= 0) exit
+      if (attempt == max_workspace_retries .or. .not. any(status == [-8, -9, -17, -20])) &
+        call report_error(this, 'factorization')
+      ! out of the workspace estimated by the analysis: more relaxation, again
+      if (this%rank == 0) this%id%ICNTL(14) = max(2*this%id%ICNTL(14), this%id%ICNTL(14) + 20)
+    end do
+    this%seconds(2) = wall_seconds() - t0
+    this%factorized = .true.
+  end subroutine numeric_factorization
 
   !> Call MUMPS with `job` and stop on an error.
   subroutine run(this, job, phase)
@@ -533,6 +605,10 @@ contains
       nullify (this%id%IRN_loc, this%id%JCN_loc, this%id%A_loc)
     end if
   end subroutine release_matrix
+
+  real(dp) function wall_seconds()
+    wall_seconds = MPI_Wtime()
+  end function wall_seconds
 
   !> The pointers of the structure that the user (this wrapper) sets.
   subroutine nullify_user_arrays(id)

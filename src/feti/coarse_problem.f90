@@ -38,11 +38,14 @@ module coarse_problem
   use constraints, only: constraints_t
   use mumps_wrapper, only: mumps_t
   use block_hash, only: block_hash_t
+  use errors, only: fatal_error
+  use timers, only: timer_start, timer_stop
+  use lapack_interfaces, only: dpotrf, dtrsv, dgemm, dgemv
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gatherv, MPI_Scatterv, MPI_Wtime, &
                      MPI_Allgatherv, MPI_Isend, MPI_Irecv, MPI_Waitall, MPI_Request, MPI_STATUSES_IGNORE, &
                      MPI_INTEGER, MPI_Comm_split, &
                      MPI_Comm_free, MPI_COMM_NULL, MPI_UNDEFINED, MPI_IN_PLACE, &
-                     MPI_Comm_split_type, MPI_COMM_TYPE_SHARED, MPI_INFO_NULL, MPI_Allreduce, MPI_MIN, &
+                     MPI_Comm_split_type, MPI_COMM_TYPE_SHARED, MPI_INFO_NULL, MPI_Allreduce, MPI_MIN, MPI_SUM, &
                      operator(/=)
   implicit none
   private
@@ -90,7 +93,18 @@ module coarse_problem
     real(dp), allocatable :: rhs(:, :)      !< (n, 1) on rank 0
     logical :: factorized = .false.
     integer :: rank = 0
-    real(dp) :: seconds_factorization = 0   !< MUMPS analysis + factorization in init
+    real(dp) :: seconds_factorization = 0   !< MUMPS analysis + factorization in init (or refactorize)
+    !> of the last init / refactorize on this rank: assembly, pivot order, MUMPS analysis, numerical factorization
+    real(dp) :: seconds_phase(4) = 0
+    logical :: reusable = .false.           !< init(reusable): refactorize may follow
+    integer(i8) :: pattern_hash = 0         !< of this rank's COO pattern (refactorize checks it)
+    integer :: refactorizations = 0         !< refactorize calls since init
+    !> low-rank update (set_update): the matrix solved with is K + V V^T, K the
+    !> factorized one, V (6 nlocal, k) in local coarse blocks; W = K^{-1} V and
+    !> the Cholesky factor of C = I + V^T W (k x k, every rank) for Woodbury's
+    !> formula (K + V V^T)^{-1} = K^{-1} - W C^{-1} W^T
+    integer :: upd_k = 0
+    real(dp), allocatable :: upd_v(:, :), upd_w(:, :), upd_c(:, :)
     ! rank groups (see the module documentation)
     integer :: ngroups = 1, group = 0, group_rank = 0, group_size = 1
     type(MPI_Comm) :: group_comm            !< this rank's group (MUMPS runs on it)
@@ -102,8 +116,18 @@ module coarse_problem
     integer, allocatable :: rcounts(:), rdispls(:)  !< per group: entries, global offsets (roots)
   contains
     procedure :: init
+    procedure :: refactorize
     procedure :: solve
+    procedure :: solve_base
+    procedure :: solve_many
+    procedure :: set_update
+    procedure :: clear_update
+    procedure :: update_rank
     procedure :: factorization_seconds
+    procedure :: factor_flops
+    procedure :: phase_seconds
+    procedure :: is_reusable
+    procedure :: n_refactorizations
     procedure :: ranks_per_group
     procedure :: groups
     procedure :: factor_entries
@@ -154,7 +178,11 @@ contains
   !> must hold the entries of G^T. Collective.
   !> `options`: the rank groups and MUMPS's BLR / out-of-core settings
   !> (default: one group of all ranks, full-rank in-core factors).
-  subroutine init(this, dec, con, layout, comm, mask, options)
+  !> `reusable`: assemble on the pattern of the whole G G^T (the rows outside
+  !> `mask` give explicit zeros) and keep it, so that `refactorize` can
+  !> factorize G_M G_M^T for another mask M with MUMPS's numerical phase alone
+  !> (the analysis of this init is reused).
+  subroutine init(this, dec, con, layout, comm, mask, options, reusable)
     class(coarse_problem_t), intent(inout) :: this
     type(decomposition_t), intent(in) :: dec
     type(constraints_t), intent(inout) :: con
@@ -162,15 +190,12 @@ contains
     type(MPI_Comm), intent(in) :: comm
     logical, intent(in), optional :: mask(:)
     type(coarse_options_t), intent(in), optional :: options
+    logical, intent(in), optional :: reusable
     type(coarse_options_t) :: opt
     integer(ip), allocatable :: perm(:)
-    real(dp), allocatable :: slots_own(:, :)
     integer(ip), allocatable :: irn(:), jcn(:)
     real(dp), allocatable :: a(:)
-    integer(ip) :: i, j1, j2, nb, pos(8)
-    real(dp) :: blk(6, 8)
     integer :: rank, ierr
-    type(block_hash_t) :: blocks
     real(dp) :: t0
 
     call this%free()
@@ -178,32 +203,20 @@ contains
     this%layout = layout
     this%n = 6*layout%nsub
     call MPI_Comm_rank(comm, rank, ierr)
+    this%rank = rank
     if (present(options)) opt = options
+    this%reusable = .false.
+    if (present(reusable)) this%reusable = reusable
     call make_groups(this, opt%ranks_per_group)
 
-    ! 1. the 6-blocks of every row, by copy slot, summed at the owner
-    call owned_row_blocks(con, slots_own)
-
-    ! 2. g_r g_r^T of every owned row into 6x6 blocks
-    call blocks%init(max(64_ip, 8*layout%nlocal + con%n_own/4))
-    do i = 1, con%n_own
-      if (present(mask)) then
-        if (.not. mask(i)) cycle
-      end if
-      call row_blocks(dec, con, layout, slots_own, i, nb, pos, blk)
-      do j1 = 1, nb
-        do j2 = j1, nb
-          call add_product(pos(j1), pos(j2), blk(:, j1), blk(:, j2))
-        end do
-      end do
-    end do
-
-    ! 3. COO of the upper triangle, to one member of every group, to MUMPS
-    call blocks%to_coo(irn, jcn, a)
-    blocks = block_hash_t()              ! released before the factorization
+    call timer_start('coarse: assembly')
+    t0 = MPI_Wtime()
+    call assemble(this, dec, con, mask, this%reusable, irn, jcn, a)
+    this%pattern_hash = coo_hash(irn, jcn)
     this%nnz_local = size(a, kind=i8)
-    this%rank = rank
-    if (this%ngroups > 1) call send_to_groups(irn, jcn, a)
+    this%seconds_phase = 0
+    this%seconds_phase(1) = MPI_Wtime() - t0
+    call timer_stop('coarse: assembly')
     call this%mumps%init(this%group_comm, .true.)
     if (this%group_size == 1) then
       call this%mumps%set_centralized(this%n, irn, jcn, a)
@@ -212,6 +225,8 @@ contains
     end if
     deallocate (irn, jcn, a)
     ! the pivot order: only the host of each group's instance reads it
+    call timer_start('coarse: ordering')
+    t0 = MPI_Wtime()
     if (this%group_rank == 0) then
       perm = coarse_ordering(dec, layout)
     else
@@ -219,17 +234,100 @@ contains
     end if
     call this%mumps%set_ordering('metis', perm)
     deallocate (perm)
+    this%seconds_phase(2) = MPI_Wtime() - t0
+    call timer_stop('coarse: ordering')
     if (opt%blr > 0) call this%mumps%set_low_rank(opt%blr)
     if (opt%ooc) call this%mumps%set_out_of_core()
-    t0 = MPI_Wtime()
-    call this%mumps%factorize()
-    this%seconds_factorization = MPI_Wtime() - t0
+    call timer_start('coarse: factorization')
+    call this%mumps%factorize(keep_pattern=this%reusable)
+    call timer_stop('coarse: factorization')
+    this%seconds_phase(3:4) = this%mumps%phase_seconds()
+    this%seconds_factorization = sum(this%seconds_phase(3:4))
     this%factorized = .true.
     if (this%group_rank == 0) then
       allocate (this%rhs(this%n, 1))
     else
       allocate (this%rhs(1, 1))
     end if
+  end subroutine init
+
+  !> G_M G_M^T for the rows of `mask` (all rows without it), factorized anew
+  !> on the pattern and with the analysis of an init(reusable=.true.): the
+  !> same matrix as a fresh init with `mask` gives, up to the rounding of the
+  !> factorization. Collective.
+  subroutine refactorize(this, dec, con, mask)
+    class(coarse_problem_t), intent(inout) :: this
+    type(decomposition_t), intent(in) :: dec
+    type(constraints_t), intent(inout) :: con
+    logical, intent(in), optional :: mask(:)
+    integer(ip), allocatable :: irn(:), jcn(:)
+    real(dp), allocatable :: a(:)
+    real(dp) :: t0
+    if (.not. (this%factorized .and. this%reusable)) &
+      call fatal_error('coarse_problem: refactorize needs an init(reusable=.true.) before')
+    call timer_start('coarse: assembly')
+    t0 = MPI_Wtime()
+    call assemble(this, dec, con, mask, .true., irn, jcn, a)
+    ! the block hash sees the same blocks in the same order: the same COO
+    if (size(a, kind=i8) /= this%nnz_local .or. coo_hash(irn, jcn) /= this%pattern_hash) &
+      call fatal_error('coarse_problem: refactorize: the assembled pattern differs from that of init')
+    this%seconds_phase = 0
+    this%seconds_phase(1) = MPI_Wtime() - t0
+    call timer_stop('coarse: assembly')
+    call this%clear_update()
+    call timer_start('coarse: factorization')
+    call this%mumps%refactorize(a)
+    call timer_stop('coarse: factorization')
+    this%seconds_phase(3:4) = this%mumps%phase_seconds()
+    this%seconds_factorization = sum(this%seconds_phase(3:4))
+    this%refactorizations = this%refactorizations + 1
+  end subroutine refactorize
+
+  !> The COO (upper triangle) of G G^T, or of G_M G_M^T with `mask`, as the
+  !> MUMPS instance of this rank's group takes it: on a group of several
+  !> ranks each rank's part (distributed input), on a one-rank group the
+  !> whole matrix. `full_pattern`: the rows outside `mask` give their blocks
+  !> with zero values, so that the pattern is that of G G^T. Collective.
+  subroutine assemble(this, dec, con, mask, full_pattern, irn, jcn, a)
+    class(coarse_problem_t), intent(inout) :: this
+    type(decomposition_t), intent(in) :: dec
+    type(constraints_t), intent(inout) :: con
+    logical, intent(in), optional :: mask(:)
+    logical, intent(in) :: full_pattern
+    integer(ip), allocatable, intent(out) :: irn(:), jcn(:)
+    real(dp), allocatable, intent(out) :: a(:)
+    real(dp), allocatable :: slots_own(:, :)
+    integer(ip) :: i, j1, j2, nb, pos(8)
+    real(dp) :: blk(6, 8)
+    type(block_hash_t) :: blocks
+    logical :: keep
+    integer :: rank, ierr
+    type(MPI_Comm) :: comm
+
+    comm = this%comm
+    rank = this%rank
+    ! 1. the 6-blocks of every row, by copy slot, summed at the owner
+    call owned_row_blocks(con, slots_own)
+
+    ! 2. g_r g_r^T of every owned row into 6x6 blocks
+    call blocks%init(max(64_ip, 8*this%layout%nlocal + con%n_own/4))
+    do i = 1, con%n_own
+      keep = .true.
+      if (present(mask)) keep = mask(i)
+      if (.not. (keep .or. full_pattern)) cycle
+      call row_blocks(dec, con, this%layout, slots_own, i, nb, pos, blk)
+      if (.not. keep) blk = 0
+      do j1 = 1, nb
+        do j2 = j1, nb
+          call add_product(pos(j1), pos(j2), blk(:, j1), blk(:, j2))
+        end do
+      end do
+    end do
+
+    ! 3. COO of the upper triangle, to one member of every group
+    call blocks%to_coo(irn, jcn, a)
+    blocks = block_hash_t()              ! released before the factorization
+    if (this%ngroups > 1) call send_to_groups(irn, jcn, a)
 
   contains
 
@@ -311,7 +409,7 @@ contains
         call blocks%add(pt, ps, transpose(outer))
       end if
     end subroutine add_product
-  end subroutine init
+  end subroutine assemble
 
   !> The column of G of every owned row, by copy slot: slots(6(j-1)+1:6j, i) is
   !> the 6-block of row i on the j-th subdomain copy of its node (zero where
@@ -391,11 +489,130 @@ contains
     end do
   end function coarse_ordering
 
+  !> x = A^{-1} b for local coarse blocks b (6*nlocal), A the factorized
+  !> matrix, or with a low-rank update (set_update) A + V V^T by Woodbury's
+  !> formula: x = A^{-1} b - W C^{-1} (V^T A^{-1} b). Collective.
+  subroutine solve(this, b, x)
+    class(coarse_problem_t), intent(inout) :: this
+    real(dp), intent(in) :: b(:)
+    real(dp), intent(out) :: x(:)
+    real(dp), allocatable :: t(:)
+    integer :: nmine, ierr
+    call this%solve_base(b, x)
+    if (this%upd_k == 0) return
+    nmine = 6*this%layout%nlocal
+    allocate (t(this%upd_k))
+    t = 0
+    if (nmine > 0) call dgemv('T', nmine, this%upd_k, 1.0_dp, this%upd_v, nmine, x, 1, 0.0_dp, t, 1)
+    call MPI_Allreduce(MPI_IN_PLACE, t, this%upd_k, MPI_REAL_DP, MPI_SUM, this%comm, ierr)
+    call dtrsv('L', 'N', 'N', this%upd_k, this%upd_c, this%upd_k, t, 1)
+    call dtrsv('L', 'T', 'N', this%upd_k, this%upd_c, this%upd_k, t, 1)
+    if (nmine > 0) call dgemv('N', nmine, this%upd_k, -1.0_dp, this%upd_w, nmine, t, 1, 1.0_dp, x, 1)
+  end subroutine solve
+
+  !> X = A^{-1} B for the columns of B (local coarse blocks, 6*nlocal x m),
+  !> A the factorized matrix (without an update): one MUMPS solve with m
+  !> right-hand sides. Collective.
+  subroutine solve_many(this, b, x)
+    class(coarse_problem_t), intent(inout) :: this
+    real(dp), intent(in) :: b(:, :)
+    real(dp), intent(out) :: x(:, :)
+    real(dp), allocatable :: rhs(:, :)
+    integer :: ierr, nmine, lo, hi, m, j
+    nmine = 6*this%layout%nlocal
+    m = size(b, 2)
+    if (m == 0) return
+    lo = this%group_offset + 1
+    hi = this%group_offset + this%group_length
+    if (this%group_rank == 0) then
+      allocate (rhs(this%n, m))
+    else
+      allocate (rhs(1, m))
+    end if
+    do j = 1, m
+      if (this%group_size == 1) then
+        rhs(lo:lo + nmine - 1, j) = b(1:nmine, j)
+      else if (this%group_rank == 0) then
+        call MPI_Gatherv(b(:, j), nmine, MPI_REAL_DP, rhs(lo:hi, j), this%gcounts, this%gdispls, MPI_REAL_DP, 0, &
+                         this%group_comm, ierr)
+      else
+        call MPI_Gatherv(b(:, j), nmine, MPI_REAL_DP, rhs(:, j), this%gcounts, this%gdispls, MPI_REAL_DP, 0, &
+                         this%group_comm, ierr)
+      end if
+      if (this%group_rank == 0 .and. this%ngroups > 1) &
+        call MPI_Allgatherv(MPI_IN_PLACE, 0, MPI_REAL_DP, rhs(:, j), this%rcounts, this%rdispls, MPI_REAL_DP, &
+                            this%roots_comm, ierr)
+    end do
+    call this%mumps%solve(rhs)
+    do j = 1, m
+      if (this%group_size == 1) then
+        x(1:nmine, j) = rhs(lo:lo + nmine - 1, j)
+      else if (this%group_rank == 0) then
+        call MPI_Scatterv(rhs(lo:hi, j), this%gcounts, this%gdispls, MPI_REAL_DP, x(:, j), nmine, MPI_REAL_DP, 0, &
+                          this%group_comm, ierr)
+      else
+        call MPI_Scatterv(rhs(:, j), this%gcounts, this%gdispls, MPI_REAL_DP, x(:, j), nmine, MPI_REAL_DP, 0, &
+                          this%group_comm, ierr)
+      end if
+    end do
+  end subroutine solve_many
+
+  !> From now on solve with A + V V^T, A the factorized matrix and V (6*nlocal
+  !> x k, local coarse blocks; k the same on every rank): W = A^{-1} V (one
+  !> solve with k right-hand sides) and the Cholesky factor of C = I + V^T W
+  !> (k x k, symmetric positive definite with eigenvalues >= 1 when A is, so
+  !> Woodbury's formula adds no ill-conditioning of its own). Collective.
+  subroutine set_update(this, v)
+    class(coarse_problem_t), intent(inout) :: this
+    real(dp), intent(in) :: v(:, :)
+    integer :: k, nmine, ierr, info, j
+    call this%clear_update()
+    k = size(v, 2)
+    if (k == 0) return
+    nmine = 6*this%layout%nlocal
+    allocate (this%upd_v(nmine, k), this%upd_w(nmine, k), this%upd_c(k, k))
+    this%upd_v = v(1:nmine, :)
+    call this%solve_many(this%upd_v, this%upd_w)
+    this%upd_c = 0
+    if (nmine > 0) call dgemm('T', 'N', k, k, nmine, 1.0_dp, this%upd_v, nmine, this%upd_w, nmine, 0.0_dp, &
+                              this%upd_c, k)
+    call MPI_Allreduce(MPI_IN_PLACE, this%upd_c, k*k, MPI_REAL_DP, MPI_SUM, this%comm, ierr)
+    ! symmetric in exact arithmetic: use the mean of both triangles
+    this%upd_c = 0.5_dp*(this%upd_c + transpose(this%upd_c))
+    do j = 1, k
+      this%upd_c(j, j) = this%upd_c(j, j) + 1
+    end do
+    call dpotrf('L', k, this%upd_c, k, info)
+    if (info /= 0) call fatal_error('coarse_problem: set_update: I + V^T A^{-1} V is not positive definite '// &
+                                    '(the factorized coarse matrix is not)')
+    this%upd_k = k
+  end subroutine set_update
+
+  !> Solve with the factorized matrix alone again.
+  subroutine clear_update(this)
+    class(coarse_problem_t), intent(inout) :: this
+    this%upd_k = 0
+    if (allocated(this%upd_v)) deallocate (this%upd_v, this%upd_w, this%upd_c)
+  end subroutine clear_update
+
+  !> k of the low-rank update (0: none).
+  integer function update_rank(this)
+    class(coarse_problem_t), intent(in) :: this
+    update_rank = this%upd_k
+  end function update_rank
+
+  !> Floating-point operations of the last numerical factorization (MUMPS's
+  !> RINFOG(3), the whole group's).
+  real(dp) function factor_flops(this)
+    class(coarse_problem_t), intent(in) :: this
+    factor_flops = this%mumps%factor_flops()
+  end function factor_flops
+
   !> x = (G G^T)^{-1} b for local coarse blocks b (6*nlocal); x may alias b's
   !> storage only through separate actual arguments. Collective: gather to the
   !> group's first rank, exchange among the first ranks, solve on the group,
   !> scatter inside the group.
-  subroutine solve(this, b, x)
+  subroutine solve_base(this, b, x)
     class(coarse_problem_t), intent(inout) :: this
     real(dp), intent(in) :: b(:)
     real(dp), intent(out) :: x(:)
@@ -425,7 +642,7 @@ contains
       call MPI_Scatterv(this%rhs, this%gcounts, this%gdispls, MPI_REAL_DP, x, nmine, MPI_REAL_DP, 0, &
                         this%group_comm, ierr)
     end if
-  end subroutine solve
+  end subroutine solve_base
 
   !> First rank of each group, first(0:ngroups), first(ngroups) = nranks:
   !> group g holds ranks first(g) .. first(g+1)-1, first(g) = ceil(g P /
@@ -550,6 +767,38 @@ contains
     factorization_seconds = this%seconds_factorization
   end function factorization_seconds
 
+  !> Seconds of the last init or refactorize on this rank: assembly (with
+  !> the exchange to the groups), pivot order, MUMPS analysis (0 after
+  !> refactorize: reused), numerical factorization.
+  function phase_seconds(this) result(seconds)
+    class(coarse_problem_t), intent(in) :: this
+    real(dp) :: seconds(4)
+    seconds = this%seconds_phase
+  end function phase_seconds
+
+  !> Initialized with reusable = .true. (refactorize may be called).
+  logical function is_reusable(this)
+    class(coarse_problem_t), intent(in) :: this
+    is_reusable = this%factorized .and. this%reusable
+  end function is_reusable
+
+  !> refactorize calls since init.
+  integer function n_refactorizations(this)
+    class(coarse_problem_t), intent(in) :: this
+    n_refactorizations = this%refactorizations
+  end function n_refactorizations
+
+  !> A hash of a COO pattern (index sequence, order included).
+  pure integer(i8) function coo_hash(irn, jcn) result(h)
+    integer(ip), intent(in) :: irn(:), jcn(:)
+    integer(i8), parameter :: modulus = 2147483647_i8
+    integer(i8) :: k
+    h = size(irn, kind=i8)
+    do k = 1, size(irn, kind=i8)
+      h = mod(h*31_i8 + int(irn(k), i8)*7919_i8 + int(jcn(k), i8), modulus)
+    end do
+  end function coo_hash
+
   !> Ranks in this rank's group (the size of its MUMPS communicator).
   integer function ranks_per_group(this)
     class(coarse_problem_t), intent(in) :: this
@@ -587,6 +836,10 @@ contains
     integer :: ierr
     if (this%factorized) call this%mumps%free()
     this%factorized = .false.
+    this%reusable = .false.
+    this%refactorizations = 0
+    this%pattern_hash = 0
+    call this%clear_update()
     if (allocated(this%rhs)) deallocate (this%rhs)
     if (this%have_comms) then
       ! after MUMPS's JOB = -2: MUMPS uses the group communicator until then

@@ -77,6 +77,7 @@ module feti_operators
     procedure :: flops_per_f_action
     procedure :: keyed_random
     procedure :: init_active_coarse
+    procedure :: masked_coarse
     procedure :: init_orthonormal
     procedure :: init_preconditioner
     ! accessors
@@ -264,6 +265,23 @@ contains
     logical, intent(in) :: mask(:)
     call this%proj%init_active_coarse(this%dec, this%b, cp, mask)
   end subroutine init_active_coarse
+
+  !> G_M G_M^T for the rows in `mask` in the projector's reusable instance
+  !> (one MUMPS analysis per run; see projector%masked_coarse); valid until
+  !> the next call. Collective.
+  !> `low_rank`: the matrix may be G_E G_E^T plus a low-rank update when
+  !> that is cheaper (SMALBE's faces; not the standard reconstruction, which
+  !> factorizes G_A G_A^T as a conventional code does).
+  !> `force_low_rank` (tests): the low-rank way whenever it applies.
+  function masked_coarse(this, mask, low_rank, force_low_rank) result(cp)
+    class(feti_t), intent(inout), target :: this
+    logical, intent(in) :: mask(:)
+    logical, intent(in) :: low_rank
+    logical, intent(in), optional :: force_low_rank
+    type(coarse_problem_t), pointer :: cp
+    cp => this%proj%masked_coarse(this%dec, this%b, mask, this%dirichlet_fixes_rigid_modes(), low_rank, &
+                                  force_low_rank)
+  end function masked_coarse
 
   !> The explicit G~ = L^{-1} G of `&solver coarse = 'cholesky'`. Collective.
   subroutine init_orthonormal(this, orth)

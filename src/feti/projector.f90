@@ -4,10 +4,10 @@
 !> the B operator that holds its entries (b_operator), which is passed in.
 !> Timer 'coarse solve'.
 module projector
-  use kinds, only: dp, i8
+  use kinds, only: dp, i8, ip, MPI_INT_IP
   use timers, only: timer_start, timer_stop
   use decomposition, only: decomposition_t
-  use constraints, only: constraints_t
+  use constraints, only: constraints_t, row_contact
   use coarse_problem, only: coarse_problem_t, coarse_layout_t, build_coarse_layout, coarse_options_t, &
                             choose_coarse_ranks, ranks_per_node
   use params, only: solver_params_t
@@ -15,9 +15,12 @@ module projector
   use logger, only: log_message
   use orthonormal_coarse, only: orthonormal_coarse_t
   use b_operator, only: b_operator_t
-  use mpi_f08, only: MPI_Comm, MPI_Comm_size
+  use mpi_f08, only: MPI_Comm, MPI_Comm_size, MPI_Allreduce, MPI_Exscan, MPI_SUM
   implicit none
   private
+
+  integer, parameter :: masked_base = 1          !< G_E G_E^T, the base of low-rank updates
+  integer, parameter :: masked_refactorized = 2  !< G_M G_M^T of the last mask
 
   type, public :: projector_t
     private
@@ -25,6 +28,9 @@ module projector
     type(coarse_layout_t) :: layout                  !< where each subdomain's 6-block goes
     type(coarse_problem_t) :: coarse                 !< (G G^T)^{-1}
     type(coarse_options_t) :: options                !< rank groups, BLR, out-of-core (also for G_A G_A^T)
+    !> G_M G_M^T of masked_coarse: analysed once (on the pattern of G G^T), refactorized per mask
+    type(coarse_problem_t) :: masked
+    integer :: masked_mode = 0                       !< masked holds: 0 nothing, masked_base, masked_refactorized
     real(dp), allocatable :: cwork(:), cwork2(:)     !< work: local coarse blocks
     integer(i8) :: solves = 0
   contains
@@ -32,6 +38,7 @@ module projector
     procedure :: solve
     procedure :: project
     procedure :: init_active_coarse
+    procedure :: masked_coarse
     procedure :: init_orthonormal
     procedure :: n_solves
     procedure :: coarse_problem
@@ -115,6 +122,98 @@ contains
     call cp%init(dec, con, this%layout, this%comm, mask, this%options)
   end subroutine init_active_coarse
 
+  !> G_M G_M^T for the rows in `mask` in the projector's one reusable
+  !> instance (valid until the next call: SMALBE's faces, then the standard
+  !> reconstruction's G_A G_A^T). Two ways (docs/THEORY.md, "Face coarse
+  !> matrices"):
+  !> - `low_rank` (faces), `regular_base` (G_E G_E^T of the equality rows E
+  !>   is regular: the Dirichlet rows fix every rigid body motion), every
+  !>   equality row in `mask` and few contact rows in it: G_M G_M^T = G_E G_E^T
+  !>   + V V^T, V = the columns G e_r of the k contact rows r in `mask`.
+  !>   G_E G_E^T is factorized once per run; each call builds V and applies
+  !>   Woodbury's formula (coarse_problem%set_update: one solve with k
+  !>   right-hand sides, a k x k Cholesky factor). "Few": the k solves cost
+  !>   less than a numerical factorization, 4 k (factor entries) <= flops.
+  !> - otherwise the numerical factorization of G_M G_M^T on the pattern and
+  !>   with the MUMPS analysis of the instance's first factorization (the
+  !>   instance is assembled on the pattern of G G^T, rows outside the mask
+  !>   as explicit zeros; coarse_problem%refactorize).
+  !> Collective.
+  !> `force_low_rank` (tests): the low-rank way whenever it applies, whatever k.
+  function masked_coarse(this, dec, b, mask, regular_base, low_rank, force_low_rank) result(cp)
+    class(projector_t), intent(inout), target :: this
+    type(decomposition_t), intent(in) :: dec
+    type(b_operator_t), intent(inout), target :: b
+    logical, intent(in) :: mask(:)
+    logical, intent(in) :: regular_base, low_rank
+    logical, intent(in), optional :: force_low_rank
+    type(coarse_problem_t), pointer :: cp
+    type(constraints_t), pointer :: con
+    logical, allocatable :: contact(:)
+    integer(ip) :: k_mine, k, i, j
+    integer(ip) :: local(2), total(2)
+    integer :: ierr
+    real(dp) :: flops, entries
+    logical :: cheap
+    real(dp), allocatable :: col(:), wloc(:), v(:, :)
+    integer(ip) :: ls, e, offset
+
+    con => b%constraints()
+    contact = con%kind(1:con%n_own) == row_contact
+    cp => this%masked
+    ! k: contact rows in the mask; local(2): equality rows outside it
+    local(1) = count(mask(1:con%n_own) .and. contact, kind=ip)
+    local(2) = count(.not. (mask(1:con%n_own) .or. contact), kind=ip)
+    call MPI_Allreduce(local, total, 2, MPI_INT_IP, MPI_SUM, this%comm, ierr)
+    k = total(1)
+    ! cost model: the main factorization's figures (the same pattern)
+    flops = this%coarse%factor_flops()
+    entries = real(this%coarse%factor_entries(), dp)
+    cheap = 4*real(k, dp)*entries <= flops
+    if (present(force_low_rank)) cheap = cheap .or. force_low_rank
+    if (low_rank .and. regular_base .and. total(2) == 0 .and. cheap) then
+      if (this%masked_mode /= masked_base) then
+        if (this%masked%is_reusable()) then
+          call this%masked%refactorize(dec, con, .not. contact)
+        else
+          call this%masked%init(dec, con, this%layout, this%comm, .not. contact, this%options, reusable=.true.)
+        end if
+        this%masked_mode = masked_base
+      end if
+      ! V: column j is G e_r for the j-th contact row r of the mask (global order: rank, then row)
+      k_mine = local(1)
+      offset = 0
+      call MPI_Exscan(k_mine, offset, 1, MPI_INT_IP, MPI_SUM, this%comm, ierr)
+      allocate (col(con%n_own), wloc(con%n_local), v(6*this%layout%nlocal, k))
+      col = 0
+      j = offset
+      do i = 1, con%n_own
+        if (mask(i) .and. contact(i)) then
+          j = j + 1
+          col(i) = real(j, dp)
+        end if
+      end do
+      call con%exchange%gather(col, wloc)
+      v = 0
+      do ls = 1, size(con%b, kind=ip)
+        associate (bs => con%b(ls))
+          do e = 1, bs%nentries
+            j = nint(wloc(bs%row(e)), ip)
+            if (j > 0) v(6*ls - 5:6*ls, j) = v(6*ls - 5:6*ls, j) + bs%g(:, e)
+          end do
+        end associate
+      end do
+      call this%masked%set_update(v)
+    else
+      if (this%masked%is_reusable()) then
+        call this%masked%refactorize(dec, con, mask)
+      else
+        call this%masked%init(dec, con, this%layout, this%comm, mask, this%options, reusable=.true.)
+      end if
+      this%masked_mode = masked_refactorized
+    end if
+  end function masked_coarse
+
   !> The explicit G~ = L^{-1} G of `&solver coarse = 'cholesky'`. Collective.
   subroutine init_orthonormal(this, dec, b, orth)
     class(projector_t), intent(in) :: this
@@ -141,6 +240,8 @@ contains
   subroutine free(this)
     class(projector_t), intent(inout) :: this
     call this%coarse%free()
+    call this%masked%free()
+    this%masked_mode = 0
     if (allocated(this%cwork)) deallocate (this%cwork, this%cwork2)
     this%solves = 0
   end subroutine free
