@@ -362,11 +362,15 @@ contains
   !> Bytes one application reads and writes on this rank: every M_c once
   !> (n_c^2 values: dgemm reads the full square), the entries of B twice (16
   !> bytes each), 4 passes over the local dual rows and X, Y (zeroed, added
-  !> to, written by dgemm, read: 4 n_c m_c values per class).
+  !> to, written by dgemm, read: 4 n_c m_c values per class), every W of the
+  !> extensions once.
   integer(i8) function bytes_per_action(this)
     class(class_operator_t), intent(in) :: this
     integer(ip) :: c
     bytes_per_action = 2*16*int(size(this%erow), i8) + 4*8*int(this%n_local_rows, i8)
+    do c = 1, this%next
+      bytes_per_action = bytes_per_action + 8*int(size(this%ext(c)%e), i8)*size(this%ext(c)%a)
+    end do
     do c = 1, this%classes%nclass
       if (this%sparse) then
         bytes_per_action = bytes_per_action + 12*int(this%smat(c)%nnz(), i8) + &
