@@ -15,7 +15,8 @@ module projector
   use logger, only: log_message
   use orthonormal_coarse, only: orthonormal_coarse_t
   use b_operator, only: b_operator_t
-  use mpi_f08, only: MPI_Comm, MPI_Comm_size, MPI_Allreduce, MPI_Exscan, MPI_SUM
+  use mpi_f08, only: MPI_Comm, MPI_Comm_size, MPI_Comm_rank, MPI_Allreduce, MPI_Exscan, MPI_SUM, MPI_LAND, &
+                     MPI_LOGICAL, MPI_IN_PLACE
   implicit none
   private
 
@@ -152,7 +153,7 @@ contains
     logical, allocatable :: contact(:)
     integer(ip) :: k_mine, k, i, j
     integer(ip) :: local(2), total(2)
-    integer :: ierr
+    integer :: ierr, rank
     real(dp) :: flops, entries
     logical :: cheap
     real(dp), allocatable :: col(:), wloc(:), v(:, :)
@@ -171,6 +172,8 @@ contains
     entries = real(this%coarse%factor_entries(), dp)
     cheap = 4*real(k, dp)*entries <= flops
     if (present(force_low_rank)) cheap = cheap .or. force_low_rank
+    ! one decision on every rank (each coarse group has its own MUMPS figures)
+    call MPI_Allreduce(MPI_IN_PLACE, cheap, 1, MPI_LOGICAL, MPI_LAND, this%comm, ierr)
     if (low_rank .and. regular_base .and. total(2) == 0 .and. cheap) then
       if (this%masked_mode /= masked_base) then
         if (this%masked%is_reusable()) then
@@ -184,6 +187,8 @@ contains
       k_mine = local(1)
       offset = 0
       call MPI_Exscan(k_mine, offset, 1, MPI_INT_IP, MPI_SUM, this%comm, ierr)
+      call MPI_Comm_rank(this%comm, rank, ierr)
+      if (rank == 0) offset = 0                  ! MPI_Exscan leaves rank 0's result undefined
       allocate (col(con%n_own), wloc(con%n_local), v(6*this%layout%nlocal, k))
       col = 0
       j = offset
