@@ -474,7 +474,7 @@ contains
     real(dp), intent(inout) :: x(:)
     character(len=qp_message_len) :: reason, buf
     real(dp) :: scale, lagr, change, m_now, q, s(2), hi(2), lo(2), l_shift, rho_old
-    integer(ip) :: n, m, outer, i, n_idle, last_raise, w, n_stable, changes, local, n_bounded
+    integer(ip) :: n, m, outer, i, n_idle, last_raise, w, n_stable, changes, local, n_bounded, n_given_up, hessian_wait
     real(dp) :: settle_limit
     logical :: gradient_given, failed, raise, polishing, polished_set, after_polish, restored
     integer :: ierr
@@ -505,6 +505,8 @@ contains
     n_stable = 0
     polished_set = .false.
     after_polish = .false.
+    n_given_up = 0
+    hessian_wait = 0
     settle_limit = 0
     if (polishing .and. self%polish_settle > 0) then
       local = count(problem%lower(1:n) > no_lower_bound, kind=ip)
@@ -742,7 +744,8 @@ contains
       ! alone to give a regular C_E C_E^T: else C_F C_F^T may be singular, e.g. a body held by
       ! its contact only)
       if (polishing .and. n_stable >= self%polish_window .and. .not. polished_set .and. &
-          self%n_polish < smalbe_polish_max .and. self%max_hessian - self%n_hessian > 2) then
+          self%n_polish - n_given_up < smalbe_polish_max .and. self%n_hessian >= hessian_wait .and. &
+          self%max_hessian - self%n_hessian > 2) then
         local = count(self%free_now .and. problem%lower(1:n) > no_lower_bound, kind=ip)
         call MPI_Allreduce(local, changes, 1, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
         if (changes == 0 .and. problem%count_at_bound(x) > 0) then
@@ -750,7 +753,8 @@ contains
         end if
       end if
       if (polishing .and. n_stable >= self%polish_window .and. .not. polished_set .and. &
-          self%n_polish < smalbe_polish_max .and. self%max_hessian - self%n_hessian > 2) then
+          self%n_polish - n_given_up < smalbe_polish_max .and. self%n_hessian >= hessian_wait .and. &
+          self%max_hessian - self%n_hessian > 2) then
         call polish_step(self, problem, x, outer, restored)
         self%free_prev = self%free_now
         n_stable = 0
@@ -758,6 +762,12 @@ contains
         if (.not. restored) then
           after_polish = .true.
           l_shift = 0
+        else if (self%polish_settle > 0) then
+          ! with the early trigger a face given up (too slow for the budget of an early polish,
+          ! ill-conditioned faces) does not use up a polish; the next waits until the products
+          ! have doubled (its budget grows with them), which bounds the waste by the products spent
+          n_given_up = n_given_up + 1
+          hessian_wait = 2*self%n_hessian
         end if
       end if
     end do
