@@ -85,10 +85,12 @@ module params
     !> changed for this many outer iterations; 0: off (docs/INPUT.md; 1 by
     !> docs/RESULTS.md "Polish: the exact face solve")
     integer(ip) :: polish_window = 1
-    integer(ip) :: polish_rounds = 3          !< face solves per polish at most (docs/INPUT.md)
-    logical :: polish_release = .false.       !< release wrong-sign active rows within the polish
-    real(dp) :: polish_settle = 0             !< settled: the active set changed on <= this fraction of contact rows
-    real(dp) :: polish_loose = 0              !< > 0: face solves pause at this relative residual to check the set
+    !> the polish's active set rounds (docs/INPUT.md; defaults by docs/RESULTS.md "Active set
+    !> identification (issue 14)")
+    integer(ip) :: polish_rounds = 8          !< face solves per polish at most
+    logical :: polish_release = .true.        !< release wrong-sign active rows within the polish
+    real(dp) :: polish_settle = 0.05_dp       !< settled: the active set changed on <= this fraction of contact rows
+    real(dp) :: polish_loose = 0.1_dp         !< > 0: face solves pause at this relative residual to check the set
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
