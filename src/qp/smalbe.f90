@@ -76,9 +76,17 @@
 !>    the next outer iteration's test accepts the pair at once; otherwise
 !>    SMALBE goes on from it (a feasible warm start: the L test of 4. is not
 !>    applied to that step). At most once per distinct active set and
-!>    smalbe_polish_max times per solve (each up to smalbe_polish_rounds face
+!>    smalbe_polish_max times per solve (each up to polish_rounds face
 !>    solves: a face solve whose x leaves a bound on a free row is projected
-!>    and the new face solved at once); each at most smalbe_polish_steps and
+!>    and the new face solved at once; with polish_release active rows whose
+!>    gradient has the wrong sign are also freed, primal-dual active set
+!>    rounds, see polish_step; with polish_loose > 0 a face solve that may be
+!>    followed by another round stops at its loose check when the set would
+!>    change, face_solve). polish_settle > 0: an outer iteration counts as
+!>    settled when the set changed on at most that fraction of the bounded
+!>    rows; a polish given up at its first face then does not count toward
+!>    smalbe_polish_max, and the next waits until the products have doubled.
+!>    Each face solve at most smalbe_polish_steps and
 !>    at most max(smalbe_polish_min_steps, the products spent so far)
 !>    CG steps, to smalbe_polish_target times the outer test's bound; a
 !>    face solve whose first steps are too slow for that budget is given up
