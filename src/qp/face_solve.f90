@@ -32,7 +32,8 @@
 !> free rows below their bound, active rows whose Lagrangian gradient
 !> g + C^T mu has the wrong sign); if there are any it stops there
 !> (`stopped_loose`: x, g, muhat a face iterate, not the face solution),
-!> else the same CG run goes on to target (no restart, no Krylov space lost).
+!> else the same CG run goes on (no restart, no Krylov space lost) and checks
+!> again each time the measure has dropped by another factor `loose`.
 !> The problem provides C_F C_F^T through qp_problem's face hooks
 !> (face_init, face_coefficient). Every routine is collective.
 module face_solve
@@ -135,7 +136,8 @@ contains
   !> g = A x - b (without multiplier) and muhat the face multiplier (see the
   !> module). per_component: measure r by problem%weighted_max, else ||r||.
   !> loose in (0, 1) (optional): the loose check of the module once the
-  !> measure of r is <= loose times its start value (and still > target),
+  !> measure of r is <= loose times its start value, then at every further
+  !> factor loose (while still > target),
   !> face_changes with tolerance change_tol (default 0).
   subroutine run(self, problem, free, x, g, muhat, target, per_component, max_steps, loose, change_tol)
     class(face_polish_t), intent(inout) :: self
@@ -213,11 +215,13 @@ contains
           exit
         end if
         if (check .and. self%measure <= loose_at) then
-          check = .false.
           if (loose_check()) then
             self%stopped_loose = .true.
             exit
           end if
+          ! the next check once the measure has dropped by another factor loose
+          loose_at = loose*self%measure
+          check = loose_at > target
         end if
         ! after abort_check steps: the mean rate so far, extrapolated, must reach target within max_steps
         if (self%n_steps >= abort_check) then

@@ -770,12 +770,15 @@ contains
         if (.not. restored) then
           after_polish = .true.
           l_shift = 0
-        else if (self%polish_settle > 0) then
+        end if
+        if (self%polish%aborted .and. self%polish_settle > 0) then
           ! with the early trigger a face given up (too slow for the budget of an early polish,
-          ! ill-conditioned faces) does not use up a polish; the next waits until the products
-          ! have doubled (its budget grows with them), which bounds the waste by the products spent
+          ! ill-conditioned faces) does not use up a polish, and the same set may be polished
+          ! again; the next polish waits until the products have doubled (its budget grows with
+          ! them), which bounds the waste by the products spent
           n_given_up = n_given_up + 1
           hessian_wait = 2*self%n_hessian
+          polished_set = .false.
         end if
       end if
     end do
@@ -843,6 +846,16 @@ contains
         self%muhat = self%muhat_prev
         call problem%track_reset()
         restored = rounds == 1
+        if (rounds > 1) then
+          ! x_prev is the previous round's x after the change of the face (projected): the
+          ! gradient saved with it is that of the x before the projection, so recompute it
+          ! (b_lin and ct_mu still belong to muhat_prev, the previous round's face multiplier)
+          call problem%hessian(x, self%gradient)
+          call problem%track_last()
+          self%gradient(1:n) = self%gradient(1:n) - self%b_lin(1:n)
+          self%n_hessian = self%n_hessian + 1
+          self%n_polish_hessian = self%n_polish_hessian + 1
+        end if
         self%n_polish_aborted = self%n_polish_aborted + 1
         if (self%monitor) then
           write (buf, '(a,i0,a,i0,a,i0,a,es9.2,a,es9.2,a)') 'polish after outer ', outer, ': given up after ', &
