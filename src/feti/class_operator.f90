@@ -16,6 +16,15 @@
 !> (set_sparse: CSR, the lumped preconditioner's K_r(U_c, U_c)) is applied
 !> with the members' vectors as the rows of X^T (m_c x n_c): one contiguous
 !> axpy of length m_c per entry of M_c.
+!>
+!> Extensions (add_extension, dense M_c only): for the members of a class
+!> whose B^_s touch only the dofs a of U_c (e = U_c \ a), the column of X is
+!> completed before the dgemm by X(e, s) = W X(a, s), one dgemm per group
+!> of such members. With M_c = S_U (a Schur complement on U_c) and
+!> W = -S_ee^{-1} S_ea, (M_c X)(a) = (S_aa - S_ae S_ee^{-1} S_ea) X(a): the
+!> Schur complement on a itself (the quotient property), which is what the
+!> Dirichlet preconditioner needs for a member that touches fewer dofs than
+!> its class (dual_preconditioner).
 module class_operator
   use kinds, only: dp, ip, i8
   use lapack_interfaces, only: dgemm
@@ -29,6 +38,13 @@ module class_operator
 
   public :: sandwich
 
+  !> X(e, cols) = w X(a, cols) for the members `cols` (1..m_c) of class c.
+  type :: extension_t
+    integer(ip) :: c = 0
+    integer(ip), allocatable :: cols(:), a(:), e(:)
+    real(dp), allocatable :: w(:, :)             !< n_e x n_a
+  end type extension_t
+
   type, public :: class_operator_t
     type(subdomain_classes_t) :: classes
     integer(ip), allocatable :: cn(:)             !< (nclass) n_c
@@ -41,12 +57,16 @@ module class_operator
     integer(ip) :: n_local_rows = 0
     logical :: sparse = .false.                   !< M_c in CSR (set_sparse) instead of dense
     type(csr_t), allocatable :: smat(:)           !< (nclass) sparse M_c
+    type(extension_t), allocatable :: ext(:)       !< add_extension
+    integer(ip) :: next = 0
+    real(dp), allocatable, private :: xa(:), xe(:)
     real(dp), allocatable, private :: xw(:), yw(:), wloc(:), wloc2(:)
   contains
     procedure :: init
     procedure :: class_dofs
     procedure :: set_matrix
     procedure :: set_sparse
+    procedure :: add_extension
     procedure :: apply
     procedure :: local_matrix
     procedure :: bytes_per_action
@@ -163,6 +183,42 @@ contains
     this%sparse = .true.
   end subroutine set_sparse
 
+  !> Before the dgemm of class `c`, complete the columns `cols` (positions
+  !> among the class's members) of X by X(e, cols) = w X(a, cols) (a, e:
+  !> disjoint positions in U_c; w: n_e x n_a). Dense M_c only.
+  subroutine add_extension(this, c, cols, a, e, w)
+    class(class_operator_t), intent(inout) :: this
+    integer(ip), intent(in) :: c, cols(:), a(:), e(:)
+    real(dp), intent(in) :: w(:, :)
+    type(extension_t), allocatable :: tmp(:)
+    integer(ip) :: na, ne
+    if (this%sparse) call fatal_error('class_operator%add_extension: dense classes only')
+    if (size(w, 1) /= size(e) .or. size(w, 2) /= size(a)) call fatal_error('class_operator%add_extension: w is n_e x n_a')
+    if (.not. allocated(this%ext)) allocate (this%ext(4))
+    if (this%next == size(this%ext)) then
+      allocate (tmp(2*this%next))
+      tmp(1:this%next) = this%ext
+      call move_alloc(tmp, this%ext)
+    end if
+    this%next = this%next + 1
+    this%ext(this%next)%c = c
+    this%ext(this%next)%cols = cols
+    this%ext(this%next)%a = a
+    this%ext(this%next)%e = e
+    this%ext(this%next)%w = w
+    na = size(a, kind=ip)*size(cols, kind=ip)
+    ne = size(e, kind=ip)*size(cols, kind=ip)
+    if (.not. allocated(this%xa)) allocate (this%xa(1), this%xe(1))
+    if (size(this%xa) < na) then
+      deallocate (this%xa)
+      allocate (this%xa(na))
+    end if
+    if (size(this%xe) < ne) then
+      deallocate (this%xe)
+      allocate (this%xe(ne))
+    end if
+  end subroutine add_extension
+
   !> y = sum_s a_s B^_s M_c(s) B^_s^T x (dual vectors, owned rows). Collective
   !> (the neighbour exchange of B).
   subroutine apply(this, b, x, y)
@@ -194,6 +250,9 @@ contains
             this%xw(o + j) = this%xw(o + j) + w*this%eval(e)*this%wloc(this%erow(e))
           end do
         end do
+        do j = 1, this%next
+          if (this%ext(j)%c == c) call extend(this%ext(j), n)
+        end do
         call dgemm('N', 'N', n, m, n, 1.0_dp, this%mat(this%coff(c) + 1), n, this%xw, n, 0.0_dp, this%yw, n)
         do kk = cl%moff(c) + 1, cl%moff(c + 1)
           s = cl%member(kk)
@@ -206,6 +265,30 @@ contains
     end associate
     call b%scatter_rows(this%wloc2, y)
   contains
+    !> X(e, cols) = w X(a, cols) for one extension of the current class.
+    subroutine extend(ex, n)
+      type(extension_t), intent(in) :: ex
+      integer(ip), intent(in) :: n
+      integer(ip) :: na, ne, mp, q, i
+      integer(i8) :: oo
+      na = size(ex%a, kind=ip)
+      ne = size(ex%e, kind=ip)
+      mp = size(ex%cols, kind=ip)
+      do q = 1, mp
+        oo = int(ex%cols(q) - 1, i8)*n
+        do i = 1, na
+          this%xa((q - 1)*na + i) = this%xw(oo + ex%a(i))
+        end do
+      end do
+      call dgemm('N', 'N', ne, mp, na, 1.0_dp, ex%w, ne, this%xa, na, 0.0_dp, this%xe, ne)
+      do q = 1, mp
+        oo = int(ex%cols(q) - 1, i8)*n
+        do i = 1, ne
+          this%xw(oo + ex%e(i)) = this%xe((q - 1)*ne + i)
+        end do
+      end do
+    end subroutine extend
+
     !> Class c with a sparse M_c: X^T and Y^T are m x n (member, dof).
     subroutine apply_sparse(c, n, m, xt, yt)
       integer(ip), intent(in) :: c, n, m
@@ -279,11 +362,15 @@ contains
   !> Bytes one application reads and writes on this rank: every M_c once
   !> (n_c^2 values: dgemm reads the full square), the entries of B twice (16
   !> bytes each), 4 passes over the local dual rows and X, Y (zeroed, added
-  !> to, written by dgemm, read: 4 n_c m_c values per class).
+  !> to, written by dgemm, read: 4 n_c m_c values per class), every W of the
+  !> extensions once.
   integer(i8) function bytes_per_action(this)
     class(class_operator_t), intent(in) :: this
     integer(ip) :: c
     bytes_per_action = 2*16*int(size(this%erow), i8) + 4*8*int(this%n_local_rows, i8)
+    do c = 1, this%next
+      bytes_per_action = bytes_per_action + 8*int(size(this%ext(c)%e), i8)*size(this%ext(c)%a)
+    end do
     do c = 1, this%classes%nclass
       if (this%sparse) then
         bytes_per_action = bytes_per_action + 12*int(this%smat(c)%nnz(), i8) + &
@@ -295,11 +382,15 @@ contains
     end do
   end function bytes_per_action
 
-  !> Flops of one application on this rank: 2 n_c^2 m_c per class (dgemm).
+  !> Flops of one application on this rank: 2 n_c^2 m_c per class (dgemm),
+  !> 2 n_e n_a per member of an extension.
   real(dp) function flops_per_action(this)
     class(class_operator_t), intent(in) :: this
     integer(ip) :: c
     flops_per_action = 0
+    do c = 1, this%next
+      flops_per_action = flops_per_action + 2*real(size(this%ext(c)%e), dp)*size(this%ext(c)%a)*size(this%ext(c)%cols)
+    end do
     do c = 1, this%classes%nclass
       if (this%sparse) then
         flops_per_action = flops_per_action + 2*real(this%smat(c)%nnz(), dp)*(this%classes%moff(c + 1) - &
@@ -318,6 +409,9 @@ contains
     if (allocated(this%eoff)) deallocate (this%eoff, this%erow, this%edof, this%eval)
     if (allocated(this%xw)) deallocate (this%xw, this%yw, this%wloc, this%wloc2)
     if (allocated(this%smat)) deallocate (this%smat)
+    if (allocated(this%ext)) deallocate (this%ext)
+    if (allocated(this%xa)) deallocate (this%xa, this%xe)
+    this%next = 0
     this%sparse = .false.
     this%classes = subdomain_classes_t()
     this%n_local_rows = 0

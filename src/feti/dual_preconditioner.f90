@@ -12,11 +12,21 @@
 !>   touches (schur_complement: one K_ii solve of all the rank's subdomains
 !>   and two products with K per application).
 !> Applied like F: dual vector -> B^T (neighbour exchange) -> local ->
-!> B (exchange back). 'lumped' with classes of congruent subdomains
-!> (`&solver share_subdomains`, K_s = c_s K_r): A_s restricted to the dofs B
-!> touches is c_s K_r(U_c, U_c), applied to all the members of a class at
-!> once (class_operator, K_r on the union U_c of the class's touched dofs in
-!> CSR, read once per application for all members).
+!> B (exchange back). With classes of congruent subdomains
+!> (`&solver share_subdomains`, K_s = c_s K_r), A_s restricted to the dofs B
+!> touches is applied to all the members of a class at once (class_operator,
+!> the class's matrix on the union U_c of the class's touched dofs, read
+!> once per application for all members):
+!> - 'lumped': c_s K_r(U_c, U_c), in CSR;
+!> - 'dirichlet': c_s S_r, S_r the dense Schur complement of K_r on U_c
+!>   (schur_complement::stiffness_schur, one MUMPS elimination per class at
+!>   setup), by one dgemm. A member that touches only the dofs a of U_c
+!>   (a subdomain on a free or symmetry face: e = U_c \ a is interior for
+!>   it) needs the Schur complement on a, S_aa - S_ae S_ee^{-1} S_ea (the
+!>   quotient property of Schur complements): its column of X is extended by
+!>   X(e) = W X(a), W = -S_ee^{-1} S_ea (one Cholesky of S_ee per group of
+!>   members with the same a, at setup), before the class's dgemm. The
+!>   result is the per-subdomain preconditioner's, up to rounding.
 !>
 !> Contact rows (constraints: spread over all copies of their node with the
 !> gluing weights, entries v_c = -w_c/sqrt(S), S = sum_c w_c) are orthogonal
@@ -44,7 +54,9 @@ module dual_preconditioner
   use subdomain, only: subdomain_t
   use b_operator, only: b_operator_t
   use constraints, only: constraints_t, row_contact
-  use schur_complement, only: schur_complement_t
+  use schur_complement, only: schur_complement_t, stiffness_schur
+  use lapack_interfaces, only: dpotrf, dtrsm
+  use sorting, only: sort_unique
   use subdomain_classes, only: subdomain_classes_t
   use class_operator, only: class_operator_t
   use csr_matrix, only: csr_t
@@ -59,7 +71,9 @@ module dual_preconditioner
     real(dp), allocatable :: inv_w(:)           !< (nlocal) 1/w_s
     real(dp), allocatable :: xall(:), yall(:)   !< work: concatenated primal vectors
     type(schur_complement_t) :: schur
-    logical :: shared = .false.                 !< 'lumped' applied per class (class_operator)
+    logical :: shared = .false.                 !< applied per class (class_operator)
+    integer(i8) :: shared_bytes = 0             !< the dense S_r and W ('dirichlet' per class)
+    real(dp) :: setup_flops = 0                 !< MUMPS eliminations and LAPACK of the shared setup
     type(class_operator_t) :: shared_op
     integer(i8) :: applications = 0
     !> D of the module: d_r per owned row (sqrt(n_r) on contact rows, 1 elsewhere)
@@ -71,6 +85,8 @@ module dual_preconditioner
     procedure :: n_applications
     procedure :: row_scaling
     procedure :: factor_bytes
+    procedure :: setup_flop_count
+    procedure :: is_shared
     procedure :: free
   end type dual_preconditioner_t
 
@@ -78,8 +94,8 @@ contains
 
   !> `variant`: 'lumped' or 'dirichlet'; `b` and `subs` (K assembled) must
   !> outlive the preconditioner; `weights(ls)` = w_s of local subdomain ls.
-  !> `classes` (optional): classes of congruent subdomains of `subs`; with
-  !> 'lumped' and some class of two members or more, A_s is applied per class.
+  !> `classes` (optional): classes of congruent subdomains of `subs`; when
+  !> they are shared (subdomain_classes_t%shared), A_s is applied per class.
   subroutine init(this, variant, b, subs, weights, classes)
     class(dual_preconditioner_t), intent(inout) :: this
     character(len=*), intent(in) :: variant
@@ -102,6 +118,13 @@ contains
     this%inv_w = 1/weights
     allocate (this%xall(b%n_concat()), this%yall(b%n_concat()))
     call contact_scaling(this, b, size(subs, kind=ip))
+    if (present(classes)) then
+      if (classes%shared()) then
+        if (variant == 'lumped') call init_shared(this, b, subs, classes)
+        if (variant == 'dirichlet') call init_shared_dirichlet(this, b, subs, classes)
+        return
+      end if
+    end if
     if (variant == 'dirichlet') then
       ! the interface: every dof with an entry of B (gluing, Dirichlet, contact)
       con => b%constraints()
@@ -115,10 +138,87 @@ contains
       end do
       call this%schur%init(subs, on_interface)
     end if
-    if (variant == 'lumped' .and. present(classes)) then
-      if (classes%shared()) call init_shared(this, b, subs, classes)
-    end if
   end subroutine init
+
+  !> 'dirichlet' per class: M_c = S_r, the dense Schur complement of K_r on
+  !> U_c, a_s = c_s / w_s^2; the members that touch only a part a of U_c
+  !> get the extension X(e) = -S_ee^{-1} S_ea X(a) (see the module).
+  subroutine init_shared_dirichlet(this, b, subs, classes)
+    class(dual_preconditioner_t), intent(inout) :: this
+    type(b_operator_t), intent(in) :: b
+    type(subdomain_t), intent(in) :: subs(:)
+    type(subdomain_classes_t), intent(in) :: classes
+    type :: group_t
+      integer(ip), allocatable :: a(:), cols(:)
+    end type group_t
+    type(group_t), allocatable :: groups(:), tmp(:)
+    integer(ip), allocatable :: dofs(:), pos(:), e(:), cols(:)
+    logical, allocatable :: in_a(:)
+    real(dp), allocatable :: sd(:, :), see(:, :), w(:, :)
+    real(dp) :: flops
+    integer(ip) :: c, r, n, kk, s, np, ng, g, na, ne, i
+    integer :: info
+    call this%shared_op%init(b, classes, classes%scale*this%inv_w**2)
+    flops = 0
+    this%shared_bytes = 0
+    do c = 1, classes%nclass
+      r = classes%rep(c)
+      call this%shared_op%class_dofs(b, c, dofs)
+      n = size(dofs, kind=ip)
+      if (n == 0) cycle
+      call stiffness_schur(subs(r), dofs, sd, flops)
+      call this%shared_op%set_matrix(c, sd)
+      this%shared_bytes = this%shared_bytes + 8*int(n, i8)*n
+      ! the members by the positions in U_c their B^_s touch
+      allocate (groups(4))
+      ng = 0
+      do kk = classes%moff(c) + 1, classes%moff(c + 1)
+        s = classes%member(kk)
+        pos = this%shared_op%edof(this%shared_op%eoff(s) + 1:this%shared_op%eoff(s + 1))
+        call sort_unique(pos, np)
+        if (np == n) cycle
+        do g = 1, ng
+          if (size(groups(g)%a) /= np) cycle
+          if (all(groups(g)%a == pos(1:np))) exit
+        end do
+        if (g > ng) then
+          if (ng == size(groups)) then
+            allocate (tmp(2*ng))
+            tmp(1:ng) = groups
+            call move_alloc(tmp, groups)
+          end if
+          ng = ng + 1
+          groups(ng)%a = pos(1:np)
+          allocate (groups(ng)%cols(0))
+        end if
+        groups(g)%cols = [groups(g)%cols, kk - classes%moff(c)]
+      end do
+      do g = 1, ng
+        na = size(groups(g)%a, kind=ip)
+        allocate (in_a(n))
+        in_a = .false.
+        in_a(groups(g)%a) = .true.
+        e = pack([(i, i=1, n)], .not. in_a)
+        ne = size(e, kind=ip)
+        see = sd(e, e)
+        w = sd(e, groups(g)%a)
+        call dpotrf('U', ne, see, ne, info)
+        if (info /= 0) call fatal_error('dual_preconditioner: S_ee of a class is not positive definite '// &
+                                        '(a subdomain whose touched dofs do not hold its rigid body motions)')
+        ! W = -S_ee^{-1} S_ea = -U^{-1} U^{-T} S_ea
+        call dtrsm('L', 'U', 'T', 'N', ne, na, -1.0_dp, see, ne, w, ne)
+        call dtrsm('L', 'U', 'N', 'N', ne, na, 1.0_dp, see, ne, w, ne)
+        flops = flops + real(ne, dp)**3/3 + 2*real(ne, dp)**2*na
+        cols = groups(g)%cols
+        call this%shared_op%add_extension(c, cols, groups(g)%a, e, w)
+        this%shared_bytes = this%shared_bytes + 8*int(ne, i8)*na
+        deallocate (in_a)
+      end do
+      deallocate (groups)
+    end do
+    this%setup_flops = flops
+    this%shared = .true.
+  end subroutine init_shared_dirichlet
 
   !> 'lumped' per class: M_c = K_r(U_c, U_c) in CSR, a_s = c_s / w_s^2.
   subroutine init_shared(this, b, subs, classes)
@@ -259,17 +359,32 @@ contains
     n_applications = this%applications
   end function n_applications
 
-  !> Bytes of the K_ii factors ('dirichlet'; 0 otherwise).
+  !> Bytes of the K_ii factors ('dirichlet'), or of the dense S_r and W
+  !> ('dirichlet' per class); 0 otherwise.
   integer(i8) function factor_bytes(this)
     class(dual_preconditioner_t), intent(in) :: this
-    factor_bytes = this%schur%factor_bytes()
+    factor_bytes = this%schur%factor_bytes() + this%shared_bytes
   end function factor_bytes
+
+  !> Flops of the setup of 'dirichlet' per class (MUMPS eliminations, LAPACK).
+  real(dp) function setup_flop_count(this)
+    class(dual_preconditioner_t), intent(in) :: this
+    setup_flop_count = this%setup_flops
+  end function setup_flop_count
+
+  !> True when A_s is applied per class of congruent subdomains.
+  logical function is_shared(this)
+    class(dual_preconditioner_t), intent(in) :: this
+    is_shared = this%shared
+  end function is_shared
 
   subroutine free(this)
     class(dual_preconditioner_t), intent(inout) :: this
     call this%schur%free()
     call this%shared_op%free()
     this%shared = .false.
+    this%shared_bytes = 0
+    this%setup_flops = 0
     if (allocated(this%inv_w)) deallocate (this%inv_w)
     if (allocated(this%xall)) deallocate (this%xall, this%yall)
     if (allocated(this%d)) deallocate (this%d, this%dx)

@@ -33,8 +33,7 @@ module f_operator
   use b_operator, only: b_operator_t
   use sorting, only: sort_unique
   use kplus, only: regularized_system
-  use mumps_wrapper, only: mumps_t
-  use mpi_f08, only: MPI_COMM_SELF
+  use schur_complement, only: dense_schur
   implicit none
   private
 
@@ -510,40 +509,16 @@ contains
     integer(ip), intent(in) :: dofs(:)
     real(dp), allocatable, intent(out) :: sd(:, :)
     real(dp), intent(inout) :: flops
-    integer(ip), allocatable :: cmap(:), irn(:), jcn(:), perm(:)
+    integer(ip), allocatable :: irn(:), jcn(:), perm(:)
     real(dp), allocatable :: a(:)
-    type(mumps_t) :: m
-    integer(ip) :: n, i, j, k
+    integer(ip) :: n
     integer :: info
 
     n = size(dofs, kind=ip)
     call regularized_system(sub, regularization, 'amd', irn, jcn, a, perm)
-    allocate (sd(n, n))
-    if (n == sub%ndof) then
-      allocate (cmap(sub%ndof))
-      cmap = 0
-      do i = 1, n
-        cmap(dofs(i)) = i
-      end do
-      sd = 0
-      do k = 1, size(a, kind=ip)
-        i = cmap(irn(k))
-        j = cmap(jcn(k))
-        sd(i, j) = sd(i, j) + a(k)
-        if (i /= j) sd(j, i) = sd(j, i) + a(k)
-      end do
-    else
-      call timer_start('explicit F: Schur')
-      call m%init(MPI_COMM_SELF, spd=.true.)
-      call m%set_centralized(sub%ndof, irn, jcn, a)
-      call m%set_ordering('amd')
-      call m%set_schur(dofs)
-      call m%factorize()
-      call m%schur_complement(sd)
-      flops = flops + m%factor_flops()
-      call m%free()
-      call timer_stop('explicit F: Schur')
-    end if
+    call timer_start('explicit F: Schur')
+    call dense_schur(sub%ndof, irn, jcn, a, dofs, sd, flops)
+    call timer_stop('explicit F: Schur')
     flops = flops + real(n, dp)**3
     call timer_start('explicit F: inverse')
     call dpotrf('U', n, sd, n, info)

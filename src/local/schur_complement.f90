@@ -12,6 +12,13 @@
 !> owns. K_ii is positive definite when the interface fixes the rigid body
 !> motions (every subdomain that shares a face with another one, or has
 !> Dirichlet rows on a face); a subdomain without interior dofs gives S = K_bb.
+!>
+!> `dense_schur`: the same Schur complement formed explicitly, dense, of a
+!> symmetric matrix given by its upper triangle (one MUMPS factorization with
+!> the Schur variables kept, MPI_COMM_SELF); the one routine that forms dense
+!> Schur complements, for the explicit F (of K_reg, f_operator) and for the
+!> Dirichlet preconditioner shared per class (of K, dual_preconditioner,
+!> through `stiffness_schur`).
 module schur_complement
   use kinds, only: dp, ip, i8
   use errors, only: fatal_error
@@ -20,6 +27,8 @@ module schur_complement
   use mpi_f08, only: MPI_COMM_SELF
   implicit none
   private
+
+  public :: dense_schur, stiffness_schur
 
   type, public :: schur_complement_t
     integer(ip) :: nblocks = 0
@@ -164,4 +173,77 @@ contains
     this%ndof = 0
     this%ninterior = 0
   end subroutine free
+
+  !> sd = S = A_vv - A_vi A_ii^{-1} A_iv, dense (both triangles), of the
+  !> symmetric matrix A of order `n` given by its upper triangle (irn, jcn, a)
+  !> on the variables v = `dofs` (in their order); A_ii must be positive
+  !> definite. All variables: sd = A(dofs, dofs). MUMPS's count of the
+  !> elimination is added to `flops`.
+  subroutine dense_schur(n, irn, jcn, a, dofs, sd, flops)
+    integer(ip), intent(in) :: n
+    integer(ip), intent(in) :: irn(:), jcn(:)
+    real(dp), intent(in) :: a(:)
+    integer(ip), intent(in) :: dofs(:)
+    real(dp), allocatable, intent(out) :: sd(:, :)
+    real(dp), intent(inout) :: flops
+    integer(ip), allocatable :: cmap(:)
+    type(mumps_t) :: m
+    integer(ip) :: nv, i, j, k
+    nv = size(dofs, kind=ip)
+    allocate (sd(nv, nv))
+    if (nv == 0) return
+    if (nv == n) then
+      allocate (cmap(n))
+      cmap = 0
+      do i = 1, nv
+        cmap(dofs(i)) = i
+      end do
+      sd = 0
+      do k = 1, size(a, kind=ip)
+        i = cmap(irn(k))
+        j = cmap(jcn(k))
+        sd(i, j) = sd(i, j) + a(k)
+        if (i /= j) sd(j, i) = sd(j, i) + a(k)
+      end do
+      return
+    end if
+    call m%init(MPI_COMM_SELF, spd=.true.)
+    call m%set_centralized(n, irn, jcn, a)
+    call m%set_ordering('amd')
+    call m%set_schur(dofs)
+    call m%factorize()
+    call m%schur_complement(sd)
+    flops = flops + m%factor_flops()
+    call m%free()
+  end subroutine dense_schur
+
+  !> sd = the dense Schur complement of K of `sub` (K itself, not
+  !> regularized) on its dofs `dofs` (dense_schur).
+  subroutine stiffness_schur(sub, dofs, sd, flops)
+    type(subdomain_t), intent(in) :: sub
+    integer(ip), intent(in) :: dofs(:)
+    real(dp), allocatable, intent(out) :: sd(:, :)
+    real(dp), intent(inout) :: flops
+    integer(ip), allocatable :: irn(:), jcn(:)
+    real(dp), allocatable :: a(:)
+    integer(ip) :: i, k, nz
+    nz = 0
+    do i = 1, sub%ndof
+      do k = sub%K%rowptr(i), sub%K%rowptr(i + 1) - 1
+        if (sub%K%colind(k) >= i) nz = nz + 1
+      end do
+    end do
+    allocate (irn(nz), jcn(nz), a(nz))
+    nz = 0
+    do i = 1, sub%ndof
+      do k = sub%K%rowptr(i), sub%K%rowptr(i + 1) - 1
+        if (sub%K%colind(k) < i) cycle
+        nz = nz + 1
+        irn(nz) = i
+        jcn(nz) = sub%K%colind(k)
+        a(nz) = sub%K%values(k)
+      end do
+    end do
+    call dense_schur(sub%ndof, irn, jcn, a, dofs, sd, flops)
+  end subroutine stiffness_schur
 end module schur_complement
