@@ -68,7 +68,8 @@ contains
                           beta=sp%beta, eta_scale=sp%eta_scale, m_no_step=sp%m_no_step, &
                           rho_growth=sp%rho_growth, rho_contraction=sp%rho_contraction, &
                           rho_window=sp%rho_window, rho_stall=sp%rho_stall, polish_window=sp%polish_window, &
-                          monitor=sp%monitor)
+                          polish_rounds=sp%polish_rounds, polish_release=sp%polish_release, &
+                          polish_settle=sp%polish_settle, polish_loose=sp%polish_loose, monitor=sp%monitor)
   end function smalbe_settings
 
   !> Build the FETI operators and the dual QP of the case `p` on `comm`.

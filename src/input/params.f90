@@ -85,6 +85,12 @@ module params
     !> changed for this many outer iterations; 0: off (docs/INPUT.md; 1 by
     !> docs/RESULTS.md "Polish: the exact face solve")
     integer(ip) :: polish_window = 1
+    !> the polish's active set rounds (docs/INPUT.md; defaults by docs/RESULTS.md "Active set
+    !> identification (issue 14)")
+    integer(ip) :: polish_rounds = 8          !< face solves per polish at most
+    logical :: polish_release = .true.        !< release wrong-sign active rows within the polish
+    real(dp) :: polish_settle = 0.05_dp       !< settled: the active set changed on <= this fraction of contact rows
+    real(dp) :: polish_loose = 0.3_dp         !< > 0: face solves check the set at every drop of their residual by this factor
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
@@ -487,16 +493,16 @@ contains
     logical :: reading
     integer(ip) :: nsub(3), nel(3), cluster(3), metis_block, distortion_seed, seed, max_outer, max_hessian, power_iterations, &
                    coarse_ranks, &
-                   rho_window, polish_window
+                   rho_window, polish_window, polish_rounds
     real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, rho_growth, &
-                rho_contraction, rho_stall, coarse_blr, &
+                rho_contraction, rho_stall, coarse_blr, polish_settle, polish_loose, &
                 regularization, active_tol, kkt_tol
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
                                m_no_step, f_action, f_storage, share_subdomains, preconditioner
     character(len=path_len) :: directory
-    logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report, coarse_ooc
+    logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report, coarse_ooc, polish_release
     namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping, cluster, metis_block
     namelist /material/ young, poisson, variation, contrast, seed
     namelist /load/ top_pressure
@@ -504,6 +510,7 @@ contains
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
       m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, rho_window, rho_stall, polish_window, &
+      polish_rounds, polish_release, polish_settle, polish_loose, &
       power_iterations, coarse, coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
       f_action, f_storage, share_subdomains, &
       regularization, scaling, stopping, preconditioner, monitor
@@ -548,6 +555,8 @@ contains
         m_scale = s%m_scale; beta = s%beta; eta_scale = s%eta_scale; m_no_step = s%m_no_step
         rho_growth = s%rho_growth; rho_contraction = s%rho_contraction; rho_window = s%rho_window
         rho_stall = s%rho_stall; polish_window = s%polish_window
+        polish_rounds = s%polish_rounds; polish_release = s%polish_release
+        polish_settle = s%polish_settle; polish_loose = s%polish_loose
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
         f_action = s%f_action; f_storage = s%f_storage; share_subdomains = s%share_subdomains
@@ -585,7 +594,8 @@ contains
     case ('solver')
       p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
                                  rho_scale, m_scale, beta, eta_scale, lower(m_no_step), rho_growth, &
-                                 rho_contraction, rho_window, rho_stall, polish_window, power_iterations, &
+                                 rho_contraction, rho_window, rho_stall, polish_window, &
+                                 polish_rounds, polish_release, polish_settle, polish_loose, power_iterations, &
                                  lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
                                  lower(share_subdomains), &
@@ -688,6 +698,12 @@ contains
         call fail('solver', 'rho_stall', 'must be in [0, 1) (0: off)', reals([s%rho_stall]))
       if (s%polish_window < 0) &
         call fail('solver', 'polish_window', 'must be >= 0 (0: off)', ints([s%polish_window]))
+      if (s%polish_rounds < 1) &
+        call fail('solver', 'polish_rounds', 'must be >= 1', ints([s%polish_rounds]))
+      if (.not. (s%polish_settle >= 0 .and. s%polish_settle < 1)) &
+        call fail('solver', 'polish_settle', 'must be in [0, 1) (0: no change)', reals([s%polish_settle]))
+      if (.not. (s%polish_loose >= 0 .and. s%polish_loose < 1)) &
+        call fail('solver', 'polish_loose', 'must be in [0, 1) (0: off)', reals([s%polish_loose]))
       if (s%power_iterations < 1) &
         call fail('solver', 'power_iterations', 'must be >= 1', ints([s%power_iterations]))
       if (.not. one_of(s%coarse, [character(len=8) :: 'mumps', 'cholesky'])) &

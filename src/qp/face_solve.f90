@@ -26,16 +26,25 @@
 !> On Im P_F, C p = 0, so A p = A_0 p (the penalty rho C^T C drops out) and
 !> P_F A_0 = P_F F for the FETI dual (P_F kills Im G^T): the face problem is
 !> the same with or without the penalty and the FETI projector P.
+!> With a loose target (`loose` times the start measure of r, above target:
+!> SMALBE's polish rounds), the run pauses once the measure of r first drops below it and
+!> counts the rows whose status the face solution would change (face_changes:
+!> free rows below their bound, active rows whose Lagrangian gradient
+!> g + C^T mu has the wrong sign); if there are any it stops there
+!> (`stopped_loose`: x, g, muhat a face iterate, not the face solution),
+!> else the same CG run goes on (no restart, no Krylov space lost) and checks
+!> again each time the measure has dropped by another factor `loose`.
 !> The problem provides C_F C_F^T through qp_problem's face hooks
 !> (face_init, face_coefficient). Every routine is collective.
 module face_solve
-  use kinds, only: dp, ip
+  use kinds, only: dp, ip, MPI_INT_IP
   use qp_problem, only: qp_problem_t, no_lower_bound
   use mprgp, only: ensure_size
+  use mpi_f08, only: MPI_Allreduce, MPI_SUM
   implicit none
   private
 
-  public :: face_project, free_rows
+  public :: face_project, free_rows, face_changes
 
   !> steps after which a run that would not reach its target within max_steps stops
   integer(ip), parameter, public :: abort_check = 10
@@ -54,6 +63,9 @@ module face_solve
     !> stopped early: the rate of the first steps would not reach target within max_steps (x, g, muhat
     !> are then not a face solution; the caller restores its iterate)
     logical :: aborted = .false.
+    !> stopped at the loose target because the face solution would change the active set there
+    logical :: stopped_loose = .false.
+    integer(ip) :: loose_counts(2) = 0   !< face_changes at the loose check (0 when not checked)
     real(dp), allocatable, private :: r(:), z(:), p(:), q(:), w(:)
     real(dp), allocatable, private :: cz(:)   !< coefficients of P_F z (muhat keeps those of g)
   contains
@@ -73,6 +85,33 @@ contains
       if (problem%lower(i) > no_lower_bound) free(i) = x(i) > problem%lower(i)
     end do
   end subroutine free_rows
+
+  !> The rows whose status a face iterate would change, summed over ranks:
+  !> counts(1) free rows (bounded) with x_i < l_i, counts(2) active rows whose
+  !> gradient glag (of the Lagrangian, face multiplier included) has the wrong
+  !> sign beyond tol: w_i glag_i < -tol (w = stop_weight, 1 without).
+  !> Collective.
+  function face_changes(problem, free, x, glag, tol) result(counts)
+    class(qp_problem_t), intent(in) :: problem
+    logical, intent(in) :: free(:)
+    real(dp), intent(in) :: x(:), glag(:)
+    real(dp), intent(in) :: tol
+    integer(ip) :: counts(2), local(2), i
+    integer :: ierr
+    real(dp) :: wi
+    local = 0
+    do i = 1, problem%n
+      if (problem%lower(i) <= no_lower_bound) cycle
+      if (free(i)) then
+        if (x(i) < problem%lower(i)) local(1) = local(1) + 1
+      else
+        wi = 1
+        if (allocated(problem%stop_weight)) wi = problem%stop_weight(i)
+        if (wi*glag(i) < -tol) local(2) = local(2) + 1
+      end if
+    end do
+    call MPI_Allreduce(local, counts, 2, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
+  end function face_changes
 
   !> py = P_F y (y restricted to F first; py may not be y); c: the
   !> coefficients of C_F^T (C_F C_F^T)^{-1} C_F y_F (eq_size). Collective.
@@ -96,7 +135,11 @@ contains
   !> on return x is on the face (x_A = l_A, C x = 0 up to the coarse solves),
   !> g = A x - b (without multiplier) and muhat the face multiplier (see the
   !> module). per_component: measure r by problem%weighted_max, else ||r||.
-  subroutine run(self, problem, free, x, g, muhat, target, per_component, max_steps)
+  !> loose in (0, 1) (optional): the loose check of the module once the
+  !> measure of r is <= loose times its start value, then at every further
+  !> factor loose (while still > target),
+  !> face_changes with tolerance change_tol (default 0).
+  subroutine run(self, problem, free, x, g, muhat, target, per_component, max_steps, loose, change_tol)
     class(face_polish_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
     logical, intent(in) :: free(:)
@@ -105,9 +148,10 @@ contains
     real(dp), intent(in) :: target
     logical, intent(in) :: per_component
     integer(ip), intent(in) :: max_steps
-    real(dp) :: rz, rz_new, pq, alpha
+    real(dp), intent(in), optional :: loose, change_tol
+    real(dp) :: rz, rz_new, pq, alpha, loose_at, ctol
     integer(ip) :: n
-    logical :: prec
+    logical :: prec, check
 
     n = problem%n
     call ensure_size(self%r, n)
@@ -122,7 +166,12 @@ contains
     self%reached = .false.
     self%breakdown = .false.
     self%aborted = .false.
+    self%stopped_loose = .false.
+    self%loose_counts = 0
     prec = problem%has_preconditioner()
+    loose_at = target
+    ctol = 0
+    if (present(change_tol)) ctol = change_tol
 
     ! 1. onto the face: x_A = l_A, then C x = 0 by the least squares correction on F
     x(1:n) = merge(x(1:n), problem%lower(1:n), free(1:n))
@@ -140,6 +189,8 @@ contains
     self%measure0 = measure(self%r)
     self%measure = self%measure0
     self%reached = self%measure <= target
+    if (present(loose)) loose_at = max(loose*self%measure0, target)
+    check = loose_at > target
     if (.not. self%reached) then
       call precondition(self%z)
       self%p = self%z
@@ -162,6 +213,15 @@ contains
         if (self%measure <= target) then
           self%reached = .true.
           exit
+        end if
+        if (check .and. self%measure <= loose_at) then
+          if (loose_check()) then
+            self%stopped_loose = .true.
+            exit
+          end if
+          ! the next check once the measure has dropped by another factor loose
+          loose_at = loose*self%measure
+          check = loose_at > target
         end if
         ! after abort_check steps: the mean rate so far, extrapolated, must reach target within max_steps
         if (self%n_steps >= abort_check) then
@@ -186,6 +246,14 @@ contains
     muhat = -muhat
 
   contains
+
+    !> face_changes at the current iterate (mu = -muhat of the last projection of g): any?
+    logical function loose_check()
+      call problem%eq_apply_t(muhat, self%w)
+      self%w(1:n) = g(1:n) - self%w(1:n)
+      self%loose_counts = face_changes(problem, free, x, self%w, ctol)
+      loose_check = sum(self%loose_counts) > 0
+    end function loose_check
 
     real(dp) function measure(v)
       real(dp), intent(in) :: v(:)

@@ -76,9 +76,17 @@
 !>    the next outer iteration's test accepts the pair at once; otherwise
 !>    SMALBE goes on from it (a feasible warm start: the L test of 4. is not
 !>    applied to that step). At most once per distinct active set and
-!>    smalbe_polish_max times per solve (each up to smalbe_polish_rounds face
+!>    smalbe_polish_max times per solve (each up to polish_rounds face
 !>    solves: a face solve whose x leaves a bound on a free row is projected
-!>    and the new face solved at once); each at most smalbe_polish_steps and
+!>    and the new face solved at once; with polish_release active rows whose
+!>    gradient has the wrong sign are also freed, primal-dual active set
+!>    rounds, see polish_step; with polish_loose > 0 a face solve that may be
+!>    followed by another round stops at its loose check when the set would
+!>    change, face_solve). polish_settle > 0: an outer iteration counts as
+!>    settled when the set changed on at most that fraction of the bounded
+!>    rows; a polish given up at its first face then does not count toward
+!>    smalbe_polish_max, and the next waits until the products have doubled.
+!>    Each face solve at most smalbe_polish_steps and
 !>    at most max(smalbe_polish_min_steps, the products spent so far)
 !>    CG steps, to smalbe_polish_target times the outer test's bound; a
 !>    face solve whose first steps are too slow for that budget is given up
@@ -106,7 +114,7 @@ module smalbe
                         no_lower_bound, qp_status_max_hessian, qp_status_max_outer, qp_status_not_finite, &
                         qp_status_incompatible, qp_status_not_run
   use mprgp, only: mprgp_t, mprgp_stop_t, ensure_size
-  use face_solve, only: face_polish_t, free_rows
+  use face_solve, only: face_polish_t, free_rows, face_changes
   use mpi_f08, only: MPI_Allreduce, MPI_SUM
   implicit none
   private
@@ -162,6 +170,17 @@ module smalbe
     !> > 0: polish (exact face solve, step 6 of the module) once the active set
     !> has not changed for this many outer iterations; 0: never
     integer(ip) :: polish_window = 0
+    !> polish: at most this many face solves per polish (rounds after a change of the active set)
+    integer(ip) :: polish_rounds = 3
+    !> polish: active rows whose gradient has the wrong sign are released (made free) and the face
+    !> solved again within the polish (a primal-dual active set step), not left to SMALBE
+    logical :: polish_release = .false.
+    !> polish trigger: an outer iteration counts as settled when the active set changed on at most
+    !> this fraction of the bounded rows (0: not at all)
+    real(dp) :: polish_settle = 0
+    !> > 0: a face solve of the polish that is not its last possible round pauses once its residual
+    !> is this many times its start value and stops there when the active set would change (face_solve)
+    real(dp) :: polish_loose = 0
     logical :: monitor = .false.               !< one line per outer iteration and a summary
   end type smalbe_settings_t
 
@@ -195,6 +214,11 @@ module smalbe
     integer(ip) :: max_outer = 200             !< cap of outer iterations
     integer(ip) :: max_hessian = 20000         !< cap of Hessian multiplications in total
     integer(ip) :: polish_window = 0           !< polish after this many outer iterations of one active set (0: off)
+    integer(ip) :: polish_rounds = 3           !< face solves per polish at most (see smalbe_settings_t)
+    logical :: polish_release = .false.        !< release wrong-sign active rows within the polish
+    real(dp) :: polish_settle = 0              !< settled: active set changes on <= this fraction of bounded rows
+    real(dp) :: polish_loose = 0               !< loose check of the face solves (0: off)
+    integer(ip) :: n_polish_released = 0       !< active rows released by the polish in all (polish_release)
     type(face_polish_t) :: polish              !< the face solve (its counters: the last polish)
     integer(ip) :: n_polish = 0                !< polish steps of the last solve
     integer(ip) :: n_polish_rounds = 0         !< face solves of those (rounds after projections included)
@@ -325,15 +349,15 @@ contains
   !> (default 0.1); monitor: one line per outer iteration and a summary.
   subroutine smalbe_init(self, a_norm, tol, max_outer, max_hessian, gamma, alpha_scale, expansion, &
                          m_scale, beta, eta_scale, monitor, m_no_step, rho_growth, rho_contraction, rho_window, &
-                         rho_stall, polish_window)
+                         rho_stall, polish_window, polish_rounds, polish_release, polish_settle, polish_loose)
     class(smalbe_t), intent(inout) :: self
     real(dp), intent(in) :: a_norm, tol
     integer(ip), intent(in) :: max_outer, max_hessian
     real(dp), intent(in), optional :: gamma, alpha_scale, m_scale, beta, eta_scale, rho_growth, rho_contraction, &
-                                      rho_stall
+                                      rho_stall, polish_settle, polish_loose
     character(len=*), intent(in), optional :: expansion, m_no_step
-    logical, intent(in), optional :: monitor
-    integer(ip), intent(in), optional :: rho_window, polish_window
+    logical, intent(in), optional :: monitor, polish_release
+    integer(ip), intent(in), optional :: rho_window, polish_window, polish_rounds
 
     call self%free()
     call self%inner%init(a_norm, tol, max_hessian, gamma, alpha_scale, expansion, monitor=.false.)
@@ -361,6 +385,14 @@ contains
     if (present(rho_stall)) self%rho_stall = rho_stall
     self%polish_window = 0
     if (present(polish_window)) self%polish_window = polish_window
+    self%polish_rounds = smalbe_polish_rounds
+    if (present(polish_rounds)) self%polish_rounds = polish_rounds
+    self%polish_release = .false.
+    if (present(polish_release)) self%polish_release = polish_release
+    self%polish_settle = 0
+    if (present(polish_settle)) self%polish_settle = polish_settle
+    self%polish_loose = 0
+    if (present(polish_loose)) self%polish_loose = polish_loose
 
     if (.not. (tol > 0 .and. tol < 1)) call fatal_error('smalbe: tol must be in (0, 1)')
     if (max_outer < 1) call fatal_error('smalbe: max_outer must be >= 1')
@@ -379,6 +411,11 @@ contains
     if (self%rho_window < 1) call fatal_error('smalbe: rho_window must be >= 1')
     if (.not. (self%rho_stall >= 0 .and. self%rho_stall < 1)) call fatal_error('smalbe: rho_stall must be in [0, 1)')
     if (self%polish_window < 0) call fatal_error('smalbe: polish_window must be >= 0')
+    if (self%polish_rounds < 1) call fatal_error('smalbe: polish_rounds must be >= 1')
+    if (.not. (self%polish_settle >= 0 .and. self%polish_settle < 1)) &
+      call fatal_error('smalbe: polish_settle must be in [0, 1)')
+    if (.not. (self%polish_loose >= 0 .and. self%polish_loose < 1)) &
+      call fatal_error('smalbe: polish_loose must be in [0, 1)')
   end subroutine smalbe_init
 
   !> The settings `s` at once, with ||A|| = a_norm (penalty included).
@@ -388,7 +425,8 @@ contains
     real(dp), intent(in) :: a_norm
     call self%init(a_norm, s%tol, s%max_outer, s%max_hessian, s%gamma, s%alpha_scale, s%expansion, &
                    s%m_scale, s%beta, s%eta_scale, s%monitor, s%m_no_step, s%rho_growth, s%rho_contraction, &
-                   s%rho_window, s%rho_stall, s%polish_window)
+                   s%rho_window, s%rho_stall, s%polish_window, s%polish_rounds, s%polish_release, &
+                   s%polish_settle, s%polish_loose)
   end subroutine smalbe_init_with
 
   subroutine smalbe_free(self)
@@ -444,7 +482,8 @@ contains
     real(dp), intent(inout) :: x(:)
     character(len=qp_message_len) :: reason, buf
     real(dp) :: scale, lagr, change, m_now, q, s(2), hi(2), lo(2), l_shift, rho_old
-    integer(ip) :: n, m, outer, i, n_idle, last_raise, w, n_stable, changes, local
+    integer(ip) :: n, m, outer, i, n_idle, last_raise, w, n_stable, changes, local, n_bounded, n_given_up, hessian_wait
+    real(dp) :: settle_limit
     logical :: gradient_given, failed, raise, polishing, polished_set, after_polish, restored
     integer :: ierr
 
@@ -474,6 +513,14 @@ contains
     n_stable = 0
     polished_set = .false.
     after_polish = .false.
+    n_given_up = 0
+    hessian_wait = 0
+    settle_limit = 0
+    if (polishing .and. self%polish_settle > 0) then
+      local = count(problem%lower(1:n) > no_lower_bound, kind=ip)
+      call MPI_Allreduce(local, n_bounded, 1, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
+      settle_limit = self%polish_settle*n_bounded
+    end if
 
     self%rho = problem%penalty()
     self%rho_initial = self%rho
@@ -591,11 +638,13 @@ contains
         call free_rows(problem, x, self%free_now)
         local = count(self%free_now .neqv. self%free_prev, kind=ip)
         call MPI_Allreduce(local, changes, 1, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
-        if (outer == 1 .or. changes > 0) then
+        ! polish_settle > 0: a change on at most settle_limit rows still counts as settled
+        if (outer == 1 .or. changes > settle_limit) then
           n_stable = 0
           polished_set = .false.
-        else if (self%inner%n_iterations > 0) then
-          n_stable = n_stable + 1      ! only outer iterations that moved x count
+        else
+          if (changes > 0) polished_set = .false.
+          if (self%inner%n_iterations > 0) n_stable = n_stable + 1      ! only outer iterations that moved x count
         end if
         self%free_prev = self%free_now
       end if
@@ -703,7 +752,8 @@ contains
       ! alone to give a regular C_E C_E^T: else C_F C_F^T may be singular, e.g. a body held by
       ! its contact only)
       if (polishing .and. n_stable >= self%polish_window .and. .not. polished_set .and. &
-          self%n_polish < smalbe_polish_max .and. self%max_hessian - self%n_hessian > 2) then
+          self%n_polish - n_given_up < smalbe_polish_max .and. self%n_hessian >= hessian_wait .and. &
+          self%max_hessian - self%n_hessian > 2) then
         local = count(self%free_now .and. problem%lower(1:n) > no_lower_bound, kind=ip)
         call MPI_Allreduce(local, changes, 1, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
         if (changes == 0 .and. problem%count_at_bound(x) > 0) then
@@ -711,7 +761,8 @@ contains
         end if
       end if
       if (polishing .and. n_stable >= self%polish_window .and. .not. polished_set .and. &
-          self%n_polish < smalbe_polish_max .and. self%max_hessian - self%n_hessian > 2) then
+          self%n_polish - n_given_up < smalbe_polish_max .and. self%n_hessian >= hessian_wait .and. &
+          self%max_hessian - self%n_hessian > 2) then
         call polish_step(self, problem, x, outer, restored)
         self%free_prev = self%free_now
         n_stable = 0
@@ -719,6 +770,15 @@ contains
         if (.not. restored) then
           after_polish = .true.
           l_shift = 0
+        end if
+        if (self%polish%aborted .and. self%polish_settle > 0) then
+          ! with the early trigger a face given up (too slow for the budget of an early polish,
+          ! ill-conditioned faces) does not use up a polish, and the same set may be polished
+          ! again; the next polish waits until the products have doubled (its budget grows with
+          ! them), which bounds the waste by the products spent
+          n_given_up = n_given_up + 1
+          hessian_wait = 2*self%n_hessian
+          polished_set = .false.
         end if
       end if
     end do
@@ -728,26 +788,36 @@ contains
   end subroutine smalbe_solve
 
   !> Step 6 of the module: the face solve on the free rows free_now, then
-  !> (x, muhat, gradient) handed back to the outer loop. When free rows end
-  !> below their bound, x is projected and the new face solved at once (a
-  !> primal active-set step), up to smalbe_polish_max polishes. Collective.
+  !> (x, muhat, gradient) handed back to the outer loop. When the face
+  !> solution would change the active set, the new face is solved at once,
+  !> at most polish_rounds face solves: free rows below their bound are
+  !> projected onto it (made active; a primal active-set step) and, with
+  !> polish_release, active rows whose gradient has the wrong sign are made
+  !> free (a primal-dual active set step). Safeguard against cycling: from
+  !> the third round on, a round whose set changes are not fewer than the
+  !> previous one's ends the polish (SMALBE goes on from the feasible pair).
+  !> Collective.
   subroutine polish_step(self, problem, x, outer, restored)
     class(smalbe_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
     real(dp), intent(inout) :: x(:)
     integer(ip), intent(in) :: outer
     logical, intent(out) :: restored      !< the first face solve was given up: x, mu as before
-    integer(ip) :: n, i, budget, counts(2), local(2), rounds
-    integer :: ierr
-    real(dp) :: wi
-    logical :: again
-    character(len=300) :: buf
+    integer(ip) :: n, i, budget, counts(2), rounds, n_changes, prev_changes
+    real(dp) :: wi, change_tol, loose
+    logical :: again, cycling
+    logical, allocatable :: release(:)
+    character(len=400) :: buf
     call timer_start('polish')
     restored = .false.
     n = problem%n
+    allocate (release(n))
     again = .true.
     self%n_polish = self%n_polish + 1
     rounds = 0
+    prev_changes = huge(1_ip)
+    ! without release, the wrong-sign active rows do not change the face (not counted by the loose check)
+    change_tol = merge(self%tol_gp, huge(1.0_dp), self%polish_release)
     do while (again)
       rounds = rounds + 1
       ! at most as many steps as the solve has spent so far (at least smalbe_polish_min_steps):
@@ -758,9 +828,12 @@ contains
       self%x_prev(1:n) = x(1:n)
       self%g_prev(1:n) = self%gradient(1:n)
       self%muhat_prev = self%muhat
+      ! the loose check only where another round may follow
+      loose = 0
+      if (rounds < self%polish_rounds) loose = self%polish_loose
       call problem%face_init(self%free_now)
       call self%polish%run(problem, self%free_now, x, self%gradient, self%muhat, &
-                           smalbe_polish_target*self%tol_gp, self%per_component, budget)
+                           smalbe_polish_target*self%tol_gp, self%per_component, budget, loose, change_tol)
       call problem%face_free()
       self%n_polish_rounds = self%n_polish_rounds + 1
       self%n_hessian = self%n_hessian + self%polish%n_hessian
@@ -773,6 +846,16 @@ contains
         self%muhat = self%muhat_prev
         call problem%track_reset()
         restored = rounds == 1
+        if (rounds > 1) then
+          ! x_prev is the previous round's x after the change of the face (projected): the
+          ! gradient saved with it is that of the x before the projection, so recompute it
+          ! (b_lin and ct_mu still belong to muhat_prev, the previous round's face multiplier)
+          call problem%hessian(x, self%gradient)
+          call problem%track_last()
+          self%gradient(1:n) = self%gradient(1:n) - self%b_lin(1:n)
+          self%n_hessian = self%n_hessian + 1
+          self%n_polish_hessian = self%n_polish_hessian + 1
+        end if
         self%n_polish_aborted = self%n_polish_aborted + 1
         if (self%monitor) then
           write (buf, '(a,i0,a,i0,a,i0,a,es9.2,a,es9.2,a)') 'polish after outer ', outer, ': given up after ', &
@@ -790,38 +873,52 @@ contains
       end do
       ! free rows below their bound (projected: MPRGP needs a feasible x), and
       ! active rows whose gradient has the wrong sign (beyond the test's bound)
-      local = 0
-      do i = 1, n
-        if (problem%lower(i) <= no_lower_bound) cycle
-        if (self%free_now(i) .and. x(i) < problem%lower(i)) local(1) = local(1) + 1
-        wi = 1
-        if (allocated(problem%stop_weight)) wi = problem%stop_weight(i)
-        if (.not. self%free_now(i) .and. wi*self%gradient(i) < -self%tol_gp) local(2) = local(2) + 1
-      end do
-      call MPI_Allreduce(local, counts, 2, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
+      counts = face_changes(problem, self%free_now, x, self%gradient, self%tol_gp)
+      n_changes = counts(1)
+      if (self%polish_release) n_changes = n_changes + counts(2)
+      cycling = self%polish_release .and. rounds >= 3 .and. n_changes > 0 .and. n_changes >= prev_changes
+      prev_changes = n_changes
       if (self%monitor) then
         write (buf, '(a,i0,a,i0,a,i0,a,es9.2,a,es9.2,a,es9.2,a,l1,a,i0,a,i0,a)') 'polish after outer ', outer, &
           ': ', self%polish%n_steps, ' CG steps, ', self%polish%n_hessian, ' products, residual ', &
           self%polish%measure0, ' -> ', self%polish%measure, ' (target ', smalbe_polish_target*self%tol_gp, &
           ', reached ', self%polish%reached, '); ', counts(1), ' free rows projected onto their bound, ', &
           counts(2), ' active rows with a wrong-sign gradient'
+        if (self%polish%stopped_loose) buf = trim(buf)//' (stopped at the loose check)'
+        if (self%polish_release .and. counts(2) > 0 .and. .not. cycling .and. rounds < self%polish_rounds) &
+          buf = trim(buf)//', released'
+        if (cycling) buf = trim(buf)//'; no fewer changes than the round before: back to SMALBE'
         call log_message(trim(buf))
       end if
-      again = counts(1) > 0 .and. rounds < smalbe_polish_rounds .and. &
+      again = n_changes > 0 .and. rounds < self%polish_rounds .and. .not. cycling .and. &
               self%max_hessian - self%n_hessian > 2 .and. .not. self%polish%breakdown
-      if (counts(1) > 0) then
+      if (again) then
+        ! the new face: projected rows active, released rows free
+        release = .false.
+        if (self%polish_release) then
+          do i = 1, n
+            if (problem%lower(i) <= no_lower_bound .or. self%free_now(i)) cycle
+            wi = 1
+            if (allocated(problem%stop_weight)) wi = problem%stop_weight(i)
+            release(i) = wi*self%gradient(i) < -self%tol_gp
+          end do
+          self%n_polish_released = self%n_polish_released + counts(2)
+        end if
+        if (counts(1) > 0) then
+          call problem%project(x)
+          call problem%track_reset()
+        end if
+        call free_rows(problem, x, self%free_now)
+        self%free_now(1:n) = self%free_now(1:n) .or. release
+      else if (counts(1) > 0) then
+        ! the gradient at the projected x for the inner MPRGP
         call problem%project(x)
         call problem%track_reset()
-        if (again) then
-          call free_rows(problem, x, self%free_now)
-        else
-          ! the gradient at the projected x for the inner MPRGP
-          call problem%hessian(x, self%gradient)
-          call problem%track_last()
-          self%gradient(1:n) = self%gradient(1:n) - self%b_lin(1:n)
-          self%n_hessian = self%n_hessian + 1
-          self%n_polish_hessian = self%n_polish_hessian + 1
-        end if
+        call problem%hessian(x, self%gradient)
+        call problem%track_last()
+        self%gradient(1:n) = self%gradient(1:n) - self%b_lin(1:n)
+        self%n_hessian = self%n_hessian + 1
+        self%n_polish_hessian = self%n_polish_hessian + 1
       end if
     end do
     call timer_stop('polish')
@@ -902,6 +999,7 @@ contains
     self%n_polish_steps = 0
     self%n_polish_exact = 0
     self%n_polish_aborted = 0
+    self%n_polish_released = 0
     self%cnorm_history = [real(dp) ::]
     self%hessian_history = [integer(ip) ::]
     self%rho_history = [real(dp) ::]
@@ -963,6 +1061,8 @@ contains
         ' face solves, ', self%n_polish_steps, &
         ' CG steps, ', self%n_polish_hessian, ' Hessian multiplications; accepted at once ', self%n_polish_exact, &
         ', given up ', self%n_polish_aborted, ')'
+      if (self%polish_release) write (buf, '(a,a,i0,a)') trim(buf), ', released ', self%n_polish_released, &
+        ' active rows'
       call log_message(buf)
     end if
     if (self%n_norm_updates > 0) then

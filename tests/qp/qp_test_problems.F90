@@ -53,6 +53,9 @@ module qp_test_problems
     real(dp), allocatable :: x_global(:)
     integer(ip) :: n_hessian_calls = 0
     integer(ip) :: poison_after = -1
+    !> face solver hooks (SMALBE's polish) on: C_F C_F^T by a dense Cholesky factorization
+    logical :: face_enabled = .false.
+    real(dp), allocatable :: face_chol(:, :)   !< lower Cholesky factor of C_F C_F^T
   contains
     procedure :: create
     procedure :: gather
@@ -62,6 +65,11 @@ module qp_test_problems
     procedure :: eq_size => dense_eq_size
     procedure :: eq_residual => dense_eq_residual
     procedure :: eq_apply_t => dense_eq_apply_t
+    procedure :: has_face_solver => dense_has_face_solver
+    procedure :: face_always_regular => dense_face_always_regular
+    procedure :: face_init => dense_face_init
+    procedure :: face_coefficient => dense_face_coefficient
+    procedure :: face_free => dense_face_free
   end type dense_qp_t
 
 contains
@@ -274,6 +282,55 @@ contains
     real(dp), intent(out) :: y(:)
     y(1:self%n) = matmul(transpose(self%c_cols), muhat(1:self%m))
   end subroutine dense_eq_apply_t
+
+  logical function dense_has_face_solver(self)
+    class(dense_qp_t), intent(in) :: self
+    dense_has_face_solver = self%face_enabled .and. self%has_equality
+  end function dense_has_face_solver
+
+  !> The test cases keep m well below the free rows: C_F has full row rank.
+  logical function dense_face_always_regular(self)
+    class(dense_qp_t), intent(in) :: self
+    dense_face_always_regular = self%face_enabled
+  end function dense_face_always_regular
+
+  !> C_F C_F^T of the free rows (local mask `free`, gathered), factorized.
+  subroutine dense_face_init(self, free)
+    class(dense_qp_t), intent(inout) :: self
+    logical, intent(in) :: free(:)
+    real(dp), allocatable :: mask(:), cf(:, :)
+    integer(ip) :: j
+    allocate (mask(self%n_global))
+    call self%gather(merge(1.0_dp, 0.0_dp, free(1:self%n)), mask)
+    cf = self%c_full
+    do j = 1, self%n_global
+      cf(:, j) = mask(j)*cf(:, j)
+    end do
+    self%face_chol = matmul(cf, transpose(cf))
+    call cholesky(self%face_chol)
+    do j = 1, self%m
+      self%face_chol(1:j - 1, j) = 0
+    end do
+  end subroutine dense_face_init
+
+  !> c = (C_F C_F^T)^{-1} C y (y the whole local slice), the form eq_apply_t takes.
+  subroutine dense_face_coefficient(self, y, c)
+    class(dense_qp_t), intent(inout) :: self
+    real(dp), intent(in) :: y(:)
+    real(dp), intent(out) :: c(:)
+    real(dp) :: cy(self%m)
+    integer(ip) :: k
+    call self%gather(y(1:self%n), self%x_global)
+    do k = 1, self%m
+      cy(k) = dot_product(self%c_full(k, :), self%x_global)
+    end do
+    c(1:self%m) = cholesky_solve(self%face_chol, cy)
+  end subroutine dense_face_coefficient
+
+  subroutine dense_face_free(self)
+    class(dense_qp_t), intent(inout) :: self
+    if (allocated(self%face_chol)) deallocate (self%face_chol)
+  end subroutine dense_face_free
 
   ! ---- small dense helpers -------------------------------------------------
 
