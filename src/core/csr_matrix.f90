@@ -25,10 +25,41 @@ module csr_matrix
     procedure :: get
     procedure :: diagonal
     procedure :: to_dense
+    procedure :: upper_coo
     procedure :: free
   end type csr_t
 
 contains
+
+  !> The entries with column >= row (the upper triangle of a symmetric
+  !> matrix) in coordinate form, row by row; `extra` > 0 leaves that many
+  !> slots at the end of the arrays for the caller to fill.
+  subroutine upper_coo(this, irn, jcn, a, extra)
+    class(csr_t), intent(in) :: this
+    integer(ip), allocatable, intent(out) :: irn(:), jcn(:)
+    real(dp), allocatable, intent(out) :: a(:)
+    integer(ip), intent(in), optional :: extra
+    integer(ip) :: i, k, nz, more
+    more = 0
+    if (present(extra)) more = extra
+    nz = 0
+    do i = 1, this%nrows
+      do k = this%rowptr(i), this%rowptr(i + 1) - 1
+        if (this%colind(k) >= i) nz = nz + 1
+      end do
+    end do
+    allocate (irn(nz + more), jcn(nz + more), a(nz + more))
+    nz = 0
+    do i = 1, this%nrows
+      do k = this%rowptr(i), this%rowptr(i + 1) - 1
+        if (this%colind(k) < i) cycle
+        nz = nz + 1
+        irn(nz) = i
+        jcn(nz) = this%colind(k)
+        a(nz) = this%values(k)
+      end do
+    end do
+  end subroutine upper_coo
 
   !> y = A x.
   subroutine matvec(this, x, y)

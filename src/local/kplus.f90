@@ -373,27 +373,11 @@ contains
     real(dp), intent(in) :: block(:, :)
     integer(ip), allocatable, intent(out) :: irn(:), jcn(:)
     real(dp), allocatable, intent(out) :: a(:)
-    integer(ip) :: i, j, k, nz, nb, nupper
+    integer(ip) :: i, j, nz, nb
 
     nb = size(fixing_dofs)
-    nupper = 0
-    do i = 1, sub%ndof
-      do k = sub%K%rowptr(i), sub%K%rowptr(i + 1) - 1
-        if (sub%K%colind(k) >= i) nupper = nupper + 1
-      end do
-    end do
-    allocate (irn(nupper + nb*(nb + 1)/2), jcn(nupper + nb*(nb + 1)/2), a(nupper + nb*(nb + 1)/2))
-    nz = 0
-    do i = 1, sub%ndof
-      do k = sub%K%rowptr(i), sub%K%rowptr(i + 1) - 1
-        if (sub%K%colind(k) >= i) then
-          nz = nz + 1
-          irn(nz) = i
-          jcn(nz) = sub%K%colind(k)
-          a(nz) = sub%K%values(k)
-        end if
-      end do
-    end do
+    call sub%K%upper_coo(irn, jcn, a, nb*(nb + 1)/2)
+    nz = size(a) - nb*(nb + 1)/2
     do j = 1, nb
       do i = 1, j
         nz = nz + 1

@@ -226,24 +226,7 @@ contains
     real(dp), intent(inout) :: flops
     integer(ip), allocatable :: irn(:), jcn(:)
     real(dp), allocatable :: a(:)
-    integer(ip) :: i, k, nz
-    nz = 0
-    do i = 1, sub%ndof
-      do k = sub%K%rowptr(i), sub%K%rowptr(i + 1) - 1
-        if (sub%K%colind(k) >= i) nz = nz + 1
-      end do
-    end do
-    allocate (irn(nz), jcn(nz), a(nz))
-    nz = 0
-    do i = 1, sub%ndof
-      do k = sub%K%rowptr(i), sub%K%rowptr(i + 1) - 1
-        if (sub%K%colind(k) < i) cycle
-        nz = nz + 1
-        irn(nz) = i
-        jcn(nz) = sub%K%colind(k)
-        a(nz) = sub%K%values(k)
-      end do
-    end do
+    call sub%K%upper_coo(irn, jcn, a)
     call dense_schur(sub%ndof, irn, jcn, a, dofs, sd, flops)
   end subroutine stiffness_schur
 end module schur_complement

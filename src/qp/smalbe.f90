@@ -850,11 +850,7 @@ contains
           ! x_prev is the previous round's x after the change of the face (projected): the
           ! gradient saved with it is that of the x before the projection, so recompute it
           ! (b_lin and ct_mu still belong to muhat_prev, the previous round's face multiplier)
-          call problem%hessian(x, self%gradient)
-          call problem%track_last()
-          self%gradient(1:n) = self%gradient(1:n) - self%b_lin(1:n)
-          self%n_hessian = self%n_hessian + 1
-          self%n_polish_hessian = self%n_polish_hessian + 1
+          call fresh_gradient()
         end if
         self%n_polish_aborted = self%n_polish_aborted + 1
         if (self%monitor) then
@@ -914,14 +910,21 @@ contains
         ! the gradient at the projected x for the inner MPRGP
         call problem%project(x)
         call problem%track_reset()
-        call problem%hessian(x, self%gradient)
-        call problem%track_last()
-        self%gradient(1:n) = self%gradient(1:n) - self%b_lin(1:n)
-        self%n_hessian = self%n_hessian + 1
-        self%n_polish_hessian = self%n_polish_hessian + 1
+        call fresh_gradient()
       end if
     end do
     call timer_stop('polish')
+
+  contains
+
+    !> The gradient A x - b_lin at the current x (one product, counted as the polish's).
+    subroutine fresh_gradient()
+      call problem%hessian(x, self%gradient)
+      call problem%track_last()
+      self%gradient(1:n) = self%gradient(1:n) - self%b_lin(1:n)
+      self%n_hessian = self%n_hessian + 1
+      self%n_polish_hessian = self%n_polish_hessian + 1
+    end subroutine fresh_gradient
   end subroutine polish_step
 
   !> 'tol not met: ||g^P|| = .. (must be <= ..), ||C x|| = .. (must be <= ..)'.
