@@ -518,42 +518,20 @@ contains
     real(dp), intent(in) :: b(:, :)
     real(dp), intent(out) :: x(:, :)
     real(dp), allocatable :: rhs(:, :)
-    integer :: ierr, nmine, lo, hi, m, j
-    nmine = 6*this%layout%nlocal
+    integer :: m, j
     m = size(b, 2)
     if (m == 0) return
-    lo = this%group_offset + 1
-    hi = this%group_offset + this%group_length
     if (this%group_rank == 0) then
       allocate (rhs(this%n, m))
     else
       allocate (rhs(1, m))
     end if
     do j = 1, m
-      if (this%group_size == 1) then
-        rhs(lo:lo + nmine - 1, j) = b(1:nmine, j)
-      else if (this%group_rank == 0) then
-        call MPI_Gatherv(b(:, j), nmine, MPI_REAL_DP, rhs(lo:hi, j), this%gcounts, this%gdispls, MPI_REAL_DP, 0, &
-                         this%group_comm, ierr)
-      else
-        call MPI_Gatherv(b(:, j), nmine, MPI_REAL_DP, rhs(:, j), this%gcounts, this%gdispls, MPI_REAL_DP, 0, &
-                         this%group_comm, ierr)
-      end if
-      if (this%group_rank == 0 .and. this%ngroups > 1) &
-        call MPI_Allgatherv(MPI_IN_PLACE, 0, MPI_REAL_DP, rhs(:, j), this%rcounts, this%rdispls, MPI_REAL_DP, &
-                            this%roots_comm, ierr)
+      call gather_column(this, b(:, j), rhs(:, j))
     end do
     call this%mumps%solve(rhs)
     do j = 1, m
-      if (this%group_size == 1) then
-        x(1:nmine, j) = rhs(lo:lo + nmine - 1, j)
-      else if (this%group_rank == 0) then
-        call MPI_Scatterv(rhs(lo:hi, j), this%gcounts, this%gdispls, MPI_REAL_DP, x(:, j), nmine, MPI_REAL_DP, 0, &
-                          this%group_comm, ierr)
-      else
-        call MPI_Scatterv(rhs(:, j), this%gcounts, this%gdispls, MPI_REAL_DP, x(:, j), nmine, MPI_REAL_DP, 0, &
-                          this%group_comm, ierr)
-      end if
+      call scatter_column(this, rhs(:, j), x(:, j))
     end do
   end subroutine solve_many
 
@@ -616,33 +594,56 @@ contains
     class(coarse_problem_t), intent(inout) :: this
     real(dp), intent(in) :: b(:)
     real(dp), intent(out) :: x(:)
+    call gather_column(this, b, this%rhs(:, 1))
+    call this%mumps%solve(this%rhs)
+    call scatter_column(this, this%rhs(:, 1), x)
+  end subroutine solve_base
+
+  !> The local coarse blocks b of every rank into the column `col` of the
+  !> group's right-hand side (on its first rank; the others pass any column):
+  !> gathered in the group, exchanged among the groups' first ranks. Collective.
+  subroutine gather_column(this, b, col)
+    class(coarse_problem_t), intent(inout) :: this
+    real(dp), intent(in) :: b(:)
+    real(dp), intent(inout) :: col(:)
     integer :: ierr, nmine, lo, hi
     nmine = 6*this%layout%nlocal
     lo = this%group_offset + 1
     hi = this%group_offset + this%group_length
     if (this%group_size == 1) then
-      this%rhs(lo:lo + nmine - 1, 1) = b(1:nmine)
+      col(lo:lo + nmine - 1) = b(1:nmine)
     else if (this%group_rank == 0) then
-      call MPI_Gatherv(b, nmine, MPI_REAL_DP, this%rhs(lo:hi, 1), this%gcounts, this%gdispls, MPI_REAL_DP, 0, &
+      call MPI_Gatherv(b, nmine, MPI_REAL_DP, col(lo:hi), this%gcounts, this%gdispls, MPI_REAL_DP, 0, &
                        this%group_comm, ierr)
     else
-      call MPI_Gatherv(b, nmine, MPI_REAL_DP, this%rhs, this%gcounts, this%gdispls, MPI_REAL_DP, 0, &
+      call MPI_Gatherv(b, nmine, MPI_REAL_DP, col, this%gcounts, this%gdispls, MPI_REAL_DP, 0, &
                        this%group_comm, ierr)
     end if
     if (this%group_rank == 0 .and. this%ngroups > 1) &
-      call MPI_Allgatherv(MPI_IN_PLACE, 0, MPI_REAL_DP, this%rhs, this%rcounts, this%rdispls, MPI_REAL_DP, &
+      call MPI_Allgatherv(MPI_IN_PLACE, 0, MPI_REAL_DP, col, this%rcounts, this%rdispls, MPI_REAL_DP, &
                           this%roots_comm, ierr)
-    call this%mumps%solve(this%rhs)
+  end subroutine gather_column
+
+  !> The solution column `col` (on the group's first rank) back to the local
+  !> coarse blocks x of every rank of the group. Collective.
+  subroutine scatter_column(this, col, x)
+    class(coarse_problem_t), intent(inout) :: this
+    real(dp), intent(in) :: col(:)
+    real(dp), intent(inout) :: x(:)
+    integer :: ierr, nmine, lo, hi
+    nmine = 6*this%layout%nlocal
+    lo = this%group_offset + 1
+    hi = this%group_offset + this%group_length
     if (this%group_size == 1) then
-      x(1:nmine) = this%rhs(lo:lo + nmine - 1, 1)
+      x(1:nmine) = col(lo:lo + nmine - 1)
     else if (this%group_rank == 0) then
-      call MPI_Scatterv(this%rhs(lo:hi, 1), this%gcounts, this%gdispls, MPI_REAL_DP, x, nmine, MPI_REAL_DP, 0, &
+      call MPI_Scatterv(col(lo:hi), this%gcounts, this%gdispls, MPI_REAL_DP, x, nmine, MPI_REAL_DP, 0, &
                         this%group_comm, ierr)
     else
-      call MPI_Scatterv(this%rhs, this%gcounts, this%gdispls, MPI_REAL_DP, x, nmine, MPI_REAL_DP, 0, &
+      call MPI_Scatterv(col, this%gcounts, this%gdispls, MPI_REAL_DP, x, nmine, MPI_REAL_DP, 0, &
                         this%group_comm, ierr)
     end if
-  end subroutine solve_base
+  end subroutine scatter_column
 
   !> First rank of each group, first(0:ngroups), first(ngroups) = nranks:
   !> group g holds ranks first(g) .. first(g+1)-1, first(g) = ceil(g P /
