@@ -34,6 +34,12 @@
 !> (`stopped_loose`: x, g, muhat a face iterate, not the face solution),
 !> else the same CG run goes on (no restart, no Krylov space lost) and checks
 !> again each time the measure has dropped by another factor `loose`.
+!> The give-up rule of 3. with loose checks (issue 14, session 8): before the
+!> first loose check the extrapolation aims at the loose target (the run's
+!> next decision point), not at target; once a loose check has found no
+!> change the face is trusted (`trusted`): no give-up any more, and the run
+!> may go on to max_steps_trusted steps (the caller's budget for a face that
+!> looks right). A wrong face is stopped by its loose check instead.
 !> The problem provides C_F C_F^T through qp_problem's face hooks
 !> (face_init, face_coefficient). Every routine is collective.
 module face_solve
@@ -65,6 +71,8 @@ module face_solve
     logical :: aborted = .false.
     !> stopped at the loose target because the face solution would change the active set there
     logical :: stopped_loose = .false.
+    !> a loose check found no change: not given up any more, budget max_steps_trusted
+    logical :: trusted = .false.
     integer(ip) :: loose_counts(2) = 0   !< face_changes at the loose check (0 when not checked)
     real(dp), allocatable, private :: r(:), z(:), p(:), q(:), w(:)
     real(dp), allocatable, private :: cz(:)   !< coefficients of P_F z (muhat keeps those of g)
@@ -138,8 +146,11 @@ contains
   !> loose in (0, 1) (optional): the loose check of the module once the
   !> measure of r is <= loose times its start value, then at every further
   !> factor loose (while still > target),
-  !> face_changes with tolerance change_tol (default 0).
-  subroutine run(self, problem, free, x, g, muhat, target, per_component, max_steps, loose, change_tol)
+  !> face_changes with tolerance change_tol (default 0). max_steps_trusted
+  !> (optional, default max_steps): the step cap once a loose check has found
+  !> no change (then never given up).
+  subroutine run(self, problem, free, x, g, muhat, target, per_component, max_steps, loose, change_tol, &
+                 max_steps_trusted)
     class(face_polish_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
     logical, intent(in) :: free(:)
@@ -149,8 +160,9 @@ contains
     logical, intent(in) :: per_component
     integer(ip), intent(in) :: max_steps
     real(dp), intent(in), optional :: loose, change_tol
-    real(dp) :: rz, rz_new, pq, alpha, loose_at, ctol
-    integer(ip) :: n
+    integer(ip), intent(in), optional :: max_steps_trusted
+    real(dp) :: rz, rz_new, pq, alpha, loose_at, ctol, aim
+    integer(ip) :: n, cap
     logical :: prec, check
 
     n = problem%n
@@ -168,6 +180,8 @@ contains
     self%aborted = .false.
     self%stopped_loose = .false.
     self%loose_counts = 0
+    self%trusted = .false.
+    cap = max_steps
     prec = problem%has_preconditioner()
     loose_at = target
     ctol = 0
@@ -195,7 +209,7 @@ contains
       call precondition(self%z)
       self%p = self%z
       rz = problem%dot(self%r, self%z)
-      do while (self%n_steps < max_steps)
+      do while (self%n_steps < cap)
         call problem%face_operator(self%p, self%q)
         self%n_hessian = self%n_hessian + 1
         self%n_steps = self%n_steps + 1
@@ -219,16 +233,24 @@ contains
             self%stopped_loose = .true.
             exit
           end if
+          ! no change: the face is trusted (no give-up, the larger step cap)
+          if (.not. self%trusted) then
+            self%trusted = .true.
+            if (present(max_steps_trusted)) cap = max(max_steps, max_steps_trusted)
+          end if
           ! the next check once the measure has dropped by another factor loose
           loose_at = loose*self%measure
           check = loose_at > target
         end if
-        ! after abort_check steps: the mean rate so far, extrapolated, must reach target within max_steps
-        if (self%n_steps >= abort_check) then
+        ! after abort_check steps (not on a trusted face): the mean rate so far, extrapolated, must
+        ! reach the next decision point (the first loose check, else target) within max_steps
+        if (self%n_steps >= abort_check .and. .not. self%trusted) then
+          aim = target
+          if (check) aim = loose_at
           if (self%measure >= self%measure0) then
             self%aborted = .true.
           else
-            self%aborted = self%n_steps*log(target/self%measure0)/log(self%measure/self%measure0) > &
+            self%aborted = self%n_steps*log(aim/self%measure0)/log(self%measure/self%measure0) > &
                            abort_factor*max_steps
           end if
           if (self%aborted) exit

@@ -106,7 +106,7 @@
 !> the status message and the totals.
 module smalbe
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
-  use kinds, only: dp, ip, name_len, MPI_INT_IP
+  use kinds, only: dp, ip, i8, name_len, MPI_INT_IP, MPI_INT_I8
   use errors, only: fatal_error
   use logger, only: log_message
   use timers, only: timer_start, timer_stop
@@ -115,7 +115,7 @@ module smalbe
                         qp_status_incompatible, qp_status_not_run
   use mprgp, only: mprgp_t, mprgp_stop_t, ensure_size
   use face_solve, only: face_polish_t, free_rows, face_changes
-  use mpi_f08, only: MPI_Allreduce, MPI_SUM
+  use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_Comm_rank
   implicit none
   private
 
@@ -194,6 +194,10 @@ module smalbe
   integer(ip), parameter, public :: smalbe_polish_steps = 500
   integer(ip), parameter, public :: smalbe_polish_min_steps = 30
   real(dp), parameter, public :: smalbe_polish_target = 0.5_dp
+  !> a face solve whose loose check found no change (a trusted face) may take this many CG steps
+  integer(ip), parameter, public :: smalbe_polish_trusted_steps = 500
+
+  public :: polish_cycling, face_signature
 
   !> The SMALBE-M solver with its inner MPRGP. All counters are totals of the
   !> last solve (components, for report.json).
@@ -793,9 +797,13 @@ contains
   !> at most polish_rounds face solves: free rows below their bound are
   !> projected onto it (made active; a primal active-set step) and, with
   !> polish_release, active rows whose gradient has the wrong sign are made
-  !> free (a primal-dual active set step). Safeguard against cycling: from
-  !> the third round on, a round whose set changes are not fewer than the
-  !> previous one's ends the polish (SMALBE goes on from the feasible pair).
+  !> free (a primal-dual active set step). Safeguard against cycling
+  !> (polish_cycling): a round that would go back to the free set of an
+  !> earlier round of this polish (compared by face_signature), or, from the
+  !> third round on, a round with strictly more set changes than the previous
+  !> one ends the polish (SMALBE goes on from the feasible pair). Equal change
+  !> counts on new sets go on (session 8: cube_h4_n64 with polish_settle =
+  !> 0.15 changed 24, 4, 4, ... rows on its way to the solution's face).
   !> Collective.
   subroutine polish_step(self, problem, x, outer, restored)
     class(smalbe_t), intent(inout) :: self
@@ -803,10 +811,11 @@ contains
     real(dp), intent(inout) :: x(:)
     integer(ip), intent(in) :: outer
     logical, intent(out) :: restored      !< the first face solve was given up: x, mu as before
-    integer(ip) :: n, i, budget, counts(2), rounds, n_changes, prev_changes
+    integer(ip) :: n, i, budget, budget_trusted, counts(2), rounds, n_changes, prev_changes
     real(dp) :: wi, change_tol, loose
-    logical :: again, cycling
+    logical :: again, cycling, revisited
     logical, allocatable :: release(:)
+    integer(i8), allocatable :: signatures(:, :)
     character(len=400) :: buf
     call timer_start('polish')
     restored = .false.
@@ -816,6 +825,8 @@ contains
     self%n_polish = self%n_polish + 1
     rounds = 0
     prev_changes = huge(1_ip)
+    allocate (signatures(2, self%polish_rounds + 1))
+    signatures(:, 1) = face_signature(problem, self%free_now)
     ! without release, the wrong-sign active rows do not change the face (not counted by the loose check)
     change_tol = merge(self%tol_gp, huge(1.0_dp), self%polish_release)
     do while (again)
@@ -824,6 +835,8 @@ contains
       ! a face that CG solves slowly (inner-bound cases) costs at most twice the products
       budget = min(smalbe_polish_steps, max(smalbe_polish_min_steps, self%n_hessian), &
                    self%max_hessian - self%n_hessian - 2)
+      ! a face whose loose check found no change: the fixed cap (face_solve, `trusted`)
+      budget_trusted = min(smalbe_polish_trusted_steps, self%max_hessian - self%n_hessian - 2)
       ! the pair to go back to when the face solve gives up (too slow for its budget)
       self%x_prev(1:n) = x(1:n)
       self%g_prev(1:n) = self%gradient(1:n)
@@ -833,7 +846,8 @@ contains
       if (rounds < self%polish_rounds) loose = self%polish_loose
       call problem%face_init(self%free_now)
       call self%polish%run(problem, self%free_now, x, self%gradient, self%muhat, &
-                           smalbe_polish_target*self%tol_gp, self%per_component, budget, loose, change_tol)
+                           smalbe_polish_target*self%tol_gp, self%per_component, budget, loose, change_tol, &
+                           budget_trusted)
       call problem%face_free()
       self%n_polish_rounds = self%n_polish_rounds + 1
       self%n_hessian = self%n_hessian + self%polish%n_hessian
@@ -872,7 +886,7 @@ contains
       counts = face_changes(problem, self%free_now, x, self%gradient, self%tol_gp)
       n_changes = counts(1)
       if (self%polish_release) n_changes = n_changes + counts(2)
-      cycling = self%polish_release .and. rounds >= 3 .and. n_changes > 0 .and. n_changes >= prev_changes
+      cycling = self%polish_release .and. polish_cycling(rounds, n_changes, prev_changes, .false.)
       prev_changes = n_changes
       if (self%monitor) then
         write (buf, '(a,i0,a,i0,a,i0,a,es9.2,a,es9.2,a,es9.2,a,l1,a,i0,a,i0,a)') 'polish after outer ', outer, &
@@ -883,7 +897,7 @@ contains
         if (self%polish%stopped_loose) buf = trim(buf)//' (stopped at the loose check)'
         if (self%polish_release .and. counts(2) > 0 .and. .not. cycling .and. rounds < self%polish_rounds) &
           buf = trim(buf)//', released'
-        if (cycling) buf = trim(buf)//'; no fewer changes than the round before: back to SMALBE'
+        if (cycling) buf = trim(buf)//'; more changes than the round before: back to SMALBE'
         call log_message(trim(buf))
       end if
       again = n_changes > 0 .and. rounds < self%polish_rounds .and. .not. cycling .and. &
@@ -906,6 +920,15 @@ contains
         end if
         call free_rows(problem, x, self%free_now)
         self%free_now(1:n) = self%free_now(1:n) .or. release
+        ! a set of an earlier round again: a cycle, back to SMALBE from the projected x
+        signatures(:, rounds + 1) = face_signature(problem, self%free_now)
+        revisited = any(signatures(1, 1:rounds) == signatures(1, rounds + 1) .and. &
+                        signatures(2, 1:rounds) == signatures(2, rounds + 1))
+        if (polish_cycling(rounds, n_changes, prev_changes, revisited)) then
+          if (self%monitor) call log_message('polish: the next face is that of an earlier round: back to SMALBE')
+          if (counts(1) > 0) call fresh_gradient()
+          exit
+        end if
       else if (counts(1) > 0) then
         ! the gradient at the projected x for the inner MPRGP
         call problem%project(x)
@@ -926,6 +949,45 @@ contains
       self%n_polish_hessian = self%n_polish_hessian + 1
     end subroutine fresh_gradient
   end subroutine polish_step
+
+  !> The polish's safeguard against cycling: with n_changes > 0 set changes
+  !> after round `rounds` (prev_changes those of the round before, huge at the
+  !> first), stop when the next set is one of an earlier round (`revisited`)
+  !> or, from the third round on, when the changes grew strictly.
+  pure logical function polish_cycling(rounds, n_changes, prev_changes, revisited)
+    integer(ip), intent(in) :: rounds, n_changes, prev_changes
+    logical, intent(in) :: revisited
+    polish_cycling = n_changes > 0 .and. (revisited .or. (rounds >= 3 .and. n_changes > prev_changes))
+  end function polish_cycling
+
+  !> Two sums of hashes of (rank, local row) over the bounded free rows, summed
+  !> over ranks: equal for equal sets (per rank), different for different ones
+  !> up to a chance of about 2^-64. Collective.
+  function face_signature(problem, free) result(sig)
+    class(qp_problem_t), intent(in) :: problem
+    logical, intent(in) :: free(:)
+    integer(i8) :: sig(2), local(2), v
+    integer(ip) :: i
+    integer :: rank, ierr, k
+    integer(i8), parameter :: low32 = 4294967295_i8
+    call MPI_Comm_rank(problem%comm, rank, ierr)
+    local = 0
+    do i = 1, problem%n
+      if (problem%lower(i) <= no_lower_bound .or. .not. free(i)) cycle
+      do k = 1, 2
+        ! xorshift64 of the row and rank (bit operations only: no overflow)
+        v = ior(ishft(int(rank, i8), 32), int(i, i8)) + k
+        v = ieor(v, ishft(v, 13))
+        v = ieor(v, ishft(v, -7))
+        v = ieor(v, ishft(v, 17))
+        v = ieor(v, ishft(v, 13))
+        v = ieor(v, ishft(v, -7))
+        v = ieor(v, ishft(v, 17))
+        local(k) = local(k) + iand(v, low32)
+      end do
+    end do
+    call MPI_Allreduce(local, sig, 2, MPI_INT_I8, MPI_SUM, problem%comm, ierr)
+  end function face_signature
 
   !> 'tol not met: ||g^P|| = .. (must be <= ..), ||C x|| = .. (must be <= ..)'.
   function distance_to_tol(self) result(text)
