@@ -132,6 +132,11 @@ module smalbe
     real(dp) :: eq_measure = 0             !< the equality measure at that x
     real(dp) :: cnorm = 0                  !< ||C x|| of the last evaluation
     logical :: evaluated = .false.         !< cnorm and z belong to the x of the last test
+    !> the next test (the first of an inner solve right after a polish) does not stop on the M test:
+    !> m_bound <- beta^j m_bound with the least j that forces a step (n_forced_cuts = j)
+    logical :: force_step = .false.
+    real(dp) :: beta = 0.5_dp
+    integer(ip) :: n_forced_cuts = 0
     integer(ip) :: n_eq_residual = 0
     real(dp), allocatable :: z(:)
     real(dp), allocatable :: work(:)       !< C^T C x, then g - rho C^T C x (per-component test)
@@ -181,6 +186,9 @@ module smalbe
     !> > 0: a face solve of the polish that is not its last possible round pauses once its residual
     !> is this many times its start value and stops there when the active set would change (face_solve)
     real(dp) :: polish_loose = 0
+    !> the inner solve right after a polish takes a step (with a bound beta^j M for that solve only)
+    !> unless the outer test accepts the polished pair (docs/THEORY.md, session 8)
+    logical :: polish_force_step = .true.
     logical :: monitor = .false.               !< one line per outer iteration and a summary
   end type smalbe_settings_t
 
@@ -222,6 +230,8 @@ module smalbe
     logical :: polish_release = .false.        !< release wrong-sign active rows within the polish
     real(dp) :: polish_settle = 0              !< settled: active set changes on <= this fraction of bounded rows
     real(dp) :: polish_loose = 0               !< loose check of the face solves (0: off)
+    logical :: force_polish_step = .true.      !< the inner solve after a polish takes a step (settings)
+    integer(ip) :: n_forced = 0                !< inner solves whose bound was cut to force a step
     integer(ip) :: n_polish_released = 0       !< active rows released by the polish in all (polish_release)
     type(face_polish_t) :: polish              !< the face solve (its counters: the last polish)
     integer(ip) :: n_polish = 0                !< polish steps of the last solve
@@ -291,8 +301,11 @@ contains
     real(dp), intent(in) :: gp_norm
     logical, intent(out) :: stop
     real(dp) :: gpw
+    logical :: force
     stop = .false.
     self%evaluated = .false.
+    force = self%force_step
+    self%force_step = .false.
     if (self%per_component) then
       gpw = problem%projected_gradient_max(x, g)
       if (gp_norm > self%eta .and. gpw > self%tol_gp + self%rho*self%w_max*gp_norm/self%m_bound) return
@@ -305,6 +318,19 @@ contains
     if (.not. ieee_is_finite(self%cnorm)) then
       stop = .true.
       return
+    end if
+    if (force .and. gp_norm <= min(self%m_bound*self%cnorm, self%eta)) then
+      ! right after a polish whose pair the outer test may not accept: the outer test first, else the
+      ! least cut of the bound (for this inner solve only) that makes the solve take a step
+      call self%outer_measures(problem, x, g, gp_norm)
+      if (self%outer_met()) then
+        stop = .true.
+        return
+      end if
+      do while (gp_norm <= self%m_bound*self%cnorm .and. self%n_forced_cuts < 200)
+        self%m_bound = self%beta*self%m_bound
+        self%n_forced_cuts = self%n_forced_cuts + 1
+      end do
     end if
     if (gp_norm <= min(self%m_bound*self%cnorm, self%eta)) then
       stop = .true.
@@ -353,14 +379,15 @@ contains
   !> (default 0.1); monitor: one line per outer iteration and a summary.
   subroutine smalbe_init(self, a_norm, tol, max_outer, max_hessian, gamma, alpha_scale, expansion, &
                          m_scale, beta, eta_scale, monitor, m_no_step, rho_growth, rho_contraction, rho_window, &
-                         rho_stall, polish_window, polish_rounds, polish_release, polish_settle, polish_loose)
+                         rho_stall, polish_window, polish_rounds, polish_release, polish_settle, polish_loose, &
+                         polish_force_step)
     class(smalbe_t), intent(inout) :: self
     real(dp), intent(in) :: a_norm, tol
     integer(ip), intent(in) :: max_outer, max_hessian
     real(dp), intent(in), optional :: gamma, alpha_scale, m_scale, beta, eta_scale, rho_growth, rho_contraction, &
                                       rho_stall, polish_settle, polish_loose
     character(len=*), intent(in), optional :: expansion, m_no_step
-    logical, intent(in), optional :: monitor, polish_release
+    logical, intent(in), optional :: monitor, polish_release, polish_force_step
     integer(ip), intent(in), optional :: rho_window, polish_window, polish_rounds
 
     call self%free()
@@ -397,6 +424,8 @@ contains
     if (present(polish_settle)) self%polish_settle = polish_settle
     self%polish_loose = 0
     if (present(polish_loose)) self%polish_loose = polish_loose
+    self%force_polish_step = .true.
+    if (present(polish_force_step)) self%force_polish_step = polish_force_step
 
     if (.not. (tol > 0 .and. tol < 1)) call fatal_error('smalbe: tol must be in (0, 1)')
     if (max_outer < 1) call fatal_error('smalbe: max_outer must be >= 1')
@@ -430,7 +459,7 @@ contains
     call self%init(a_norm, s%tol, s%max_outer, s%max_hessian, s%gamma, s%alpha_scale, s%expansion, &
                    s%m_scale, s%beta, s%eta_scale, s%monitor, s%m_no_step, s%rho_growth, s%rho_contraction, &
                    s%rho_window, s%rho_stall, s%polish_window, s%polish_rounds, s%polish_release, &
-                   s%polish_settle, s%polish_loose)
+                   s%polish_settle, s%polish_loose, s%polish_force_step)
   end subroutine smalbe_init_with
 
   subroutine smalbe_free(self)
@@ -583,9 +612,17 @@ contains
       self%g_prev(1:n) = self%gradient(1:n)
       self%m_bound = m_now*self%beta**n_idle
       self%rule%m_bound = self%m_bound
+      self%rule%beta = self%beta
+      self%rule%n_forced_cuts = 0
+      ! right after a polish (force_polish_step): the inner solve takes a step unless the outer test holds
+      self%rule%force_step = after_polish .and. self%force_polish_step
       call self%inner%minimize(problem, self%b_lin, x, self%gradient, self%rule, &
                                self%max_hessian - self%n_hessian, gradient_given)
       gradient_given = .true.
+      if (self%rule%n_forced_cuts > 0) then
+        self%m_bound = self%rule%m_bound      ! the bound this inner solve used (monitor)
+        self%n_forced = self%n_forced + 1
+      end if
       self%n_outer = outer
       self%n_hessian = self%n_hessian + self%inner%n_hessian
       self%n_inner = self%n_inner + self%inner%n_iterations
@@ -1065,6 +1102,7 @@ contains
     self%n_polish_exact = 0
     self%n_polish_aborted = 0
     self%n_polish_released = 0
+    self%n_forced = 0
     self%cnorm_history = [real(dp) ::]
     self%hessian_history = [integer(ip) ::]
     self%rho_history = [real(dp) ::]
@@ -1128,6 +1166,8 @@ contains
         ', given up ', self%n_polish_aborted, ')'
       if (self%polish_release) write (buf, '(a,a,i0,a)') trim(buf), ', released ', self%n_polish_released, &
         ' active rows'
+      if (self%n_forced > 0) write (buf, '(a,a,i0,a)') trim(buf), '; ', self%n_forced, &
+        ' inner solves after a polish made to take a step'
       call log_message(buf)
     end if
     if (self%n_norm_updates > 0) then
