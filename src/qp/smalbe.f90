@@ -90,7 +90,12 @@
 !>    at most max(smalbe_polish_min_steps, the products spent so far)
 !>    CG steps, to smalbe_polish_target times the outer test's bound; a
 !>    face solve whose first steps are too slow for that budget is given up
-!>    and the iterate restored (face_solve, `aborted`).
+!>    and the iterate restored (face_solve, `aborted`), unless a loose check
+!>    has found no change on it (a trusted face: never given up, at most
+!>    smalbe_polish_trusted_steps steps). With polish_force_step (default)
+!>    the inner solve right after a polish takes at least one step unless
+!>    the outer test accepts the polished pair (its bound beta^j M for that
+!>    solve only, see inner_stop_test; docs/THEORY.md "Polish robustness").
 !>    Timer 'polish' (a part of 'solve': the face matrix's assembly and
 !>    factorization, the CG steps with their products).
 !>
