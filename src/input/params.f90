@@ -89,7 +89,7 @@ module params
     !> identification (issue 14)")
     integer(ip) :: polish_rounds = 8          !< face solves per polish at most
     logical :: polish_release = .true.        !< release wrong-sign active rows within the polish
-    real(dp) :: polish_settle = 0.05_dp       !< settled: the active set changed on <= this fraction of contact rows
+    real(dp) :: polish_settle = 0.15_dp       !< settled: the active set changed on <= this fraction of contact rows
     real(dp) :: polish_loose = 0.3_dp         !< > 0: face solves check the set at every drop of their residual by this factor
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
