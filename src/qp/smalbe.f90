@@ -966,7 +966,8 @@ contains
         signatures(:, rounds + 1) = face_signature(problem, self%free_now)
         revisited = any(signatures(1, 1:rounds) == signatures(1, rounds + 1) .and. &
                         signatures(2, 1:rounds) == signatures(2, rounds + 1))
-        if (polish_cycling(rounds, n_changes, prev_changes, revisited)) then
+        ! (the growth test of polish_cycling was made above: here n_changes > 0, only the revisit is new)
+        if (revisited) then
           if (self%monitor) call log_message('polish: the next face is that of an earlier round: back to SMALBE')
           if (counts(1) > 0) call fresh_gradient()
           exit
@@ -1003,8 +1004,8 @@ contains
   end function polish_cycling
 
   !> Two sums of hashes of (rank, local row) over the bounded free rows, summed
-  !> over ranks: equal for equal sets (per rank), different for different ones
-  !> up to a chance of about 2^-64. Collective.
+  !> over ranks: equal for equal sets (per rank); different sets collide only
+  !> by chance (two independent 32-bit hash sums). Collective.
   function face_signature(problem, free) result(sig)
     class(qp_problem_t), intent(in) :: problem
     logical, intent(in) :: free(:)
