@@ -43,6 +43,7 @@ module ritz_values
     procedure :: add_alpha
     procedure :: add_beta
     procedure :: end_run
+    procedure :: current_ratio
     procedure :: merge
   end type cg_ritz_t
 
@@ -120,6 +121,29 @@ contains
     self%theta_min = min(self%theta_min, lo)
     self%theta_max = max(self%theta_max, hi)
   end subroutine end_run
+
+  !> theta_max/theta_min of the run being collected, from its m step lengths
+  !> and m-1 conjugation coefficients (0 when it has fewer than 2 steps or
+  !> its Ritz values are not positive and finite). The run stays open; this
+  !> is the running condition estimate `&solver preconditioner = 'auto'`
+  !> watches (O(m) work per Sturm count, 120 counts).
+  real(dp) function current_ratio(self) result(ratio)
+    class(cg_ritz_t), intent(in) :: self
+    real(dp), allocatable :: d(:), e(:)
+    real(dp) :: lo, hi
+    integer(ip) :: k, m
+    ratio = 0
+    m = self%m
+    if (.not. self%open .or. m < 2) return
+    allocate (d(m), e(m - 1))
+    d(1) = 1/self%alpha(1)
+    do k = 2, m
+      d(k) = 1/self%alpha(k) + self%beta(k - 1)/self%alpha(k - 1)
+      e(k - 1) = sqrt(self%beta(k - 1))/self%alpha(k - 1)
+    end do
+    call tridiagonal_extremes(d, e, lo, hi)
+    if (lo > 0 .and. hi >= lo .and. ieee_is_finite(hi)) ratio = hi/lo
+  end function current_ratio
 
   !> Add the statistics of `other` (closed runs only) to these.
   subroutine merge(self, other)

@@ -28,6 +28,15 @@
 !> interval (docs/THEORY.md "Preconditioned MPRGP"). Two projections and one
 !> M^{-1} per application; MPRGP uses it in the face only.
 !>
+!> 'auto' (set_preconditioner with a switch threshold kappa_s): M^{-1} starts
+!> as 'lumped'; MPRGP reports the running Ritz estimate of the condition of
+!> R_F M_A^{-1} R_F A after every preconditioned CG step
+!> (qp_problem: condition_estimate), and the first time its maximum over
+!> the ranks exceeds kappa_s the Dirichlet M^{-1} is set up (once) and used
+!> from then on (MPRGP restarts its CG direction). `switch_at` is the count
+!> of Hessian products (hessian and face_operator calls) at the switch,
+!> -1 if none (docs/THEORY.md "Adaptive preconditioner").
+!>
 !> Stopping test: the projected gradient is (up to the factor 1/s) minus the
 !> constraint violation B u - c of the displacements that the current
 !> multipliers reconstruct (projected on the free rows), row i being
@@ -45,6 +54,8 @@ module dual_problem
   use coarse_problem, only: coarse_problem_t
   use dual_preconditioner, only: dual_preconditioner_t
   use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX
+  use timers, only: timer_start, timer_stop
+  use logger, only: log_message
   implicit none
   private
 
@@ -65,6 +76,14 @@ module dual_problem
     type(dual_preconditioner_t) :: prec        !< M^{-1} (when use_prec)
     logical :: use_prec = .false.
     real(dp) :: prec_q_weight = 1              !< sigma: M_A^{-1} A = sigma on Im Q
+    !> 'auto': lumped until the face condition estimate exceeds switch_kappa
+    logical, private :: auto_pending = .false.
+    logical :: auto_mode = .false.             !< set_preconditioner was asked for 'auto'
+    real(dp) :: switch_kappa = 0               !< the threshold kappa_s ('auto')
+    real(dp), allocatable, private :: prec_weights(:)
+    integer(ip) :: n_products = 0              !< hessian + face_operator calls since init
+    integer(ip) :: switch_at = -1              !< n_products at the switch to 'dirichlet', -1: none
+    real(dp) :: switch_estimate = 0            !< the estimate that triggered it
     real(dp), allocatable, private :: wp(:), wq(:), wm(:)
     !> G_F G_F^T of SMALBE's face solve (F: equality rows and free contact
     !> rows): the FETI operators' reusable masked instance (one MUMPS analysis
@@ -90,6 +109,8 @@ module dual_problem
     procedure :: has_preconditioner
     procedure :: precondition
     procedure :: preconditioner_name
+    procedure :: watches_condition
+    procedure :: condition_estimate
     procedure :: has_face_solver
     procedure :: face_always_regular
     procedure :: face_init
@@ -135,6 +156,7 @@ contains
     self%last_valid = .false.
     self%x_valid = .false.
     self%tracked_residuals = 0
+    self%n_products = 0
     call self%prepare()
     ! b = P (d - F lambda~)
     call op%apply_f(op%lambda_tilde_vector(), self%fpx)
@@ -182,22 +204,73 @@ contains
     call self%op%apply_f(self%px, self%fpx)
     call self%apply_projector(self%fpx, self%pfpx, .false.)
     y = (self%pfpx + self%rho*(x - self%px))/self%scale
+    self%n_products = self%n_products + 1
   end subroutine hessian
 
-  !> Use M_A^{-1} built on `kind` ('lumped' | 'dirichlet'; 'none': no
-  !> preconditioner) with the subdomain weights w_s (dual_preconditioner).
-  !> After init. Collective.
-  subroutine set_preconditioner(self, kind, weights)
+  !> Use M_A^{-1} built on `kind` ('lumped' | 'dirichlet' | 'auto'; 'none':
+  !> no preconditioner) with the subdomain weights w_s (dual_preconditioner).
+  !> 'auto' starts with 'lumped' and switches to 'dirichlet' once the face
+  !> condition estimate exceeds `switch_kappa` (required with 'auto'; see
+  !> the module). After init. Collective.
+  subroutine set_preconditioner(self, kind, weights, switch_kappa)
     class(dual_problem_t), intent(inout) :: self
     character(len=*), intent(in) :: kind
     real(dp), intent(in) :: weights(:)
+    real(dp), intent(in), optional :: switch_kappa
     call self%prec%free()
     self%use_prec = kind /= 'none'
+    self%auto_mode = kind == 'auto'
+    self%auto_pending = self%auto_mode
+    self%switch_at = -1
+    self%switch_estimate = 0
     if (.not. self%use_prec) return
-    call self%op%init_preconditioner(self%prec, kind, weights)
+    if (self%auto_mode) then
+      if (.not. present(switch_kappa)) call fatal_error("dual_problem: preconditioner 'auto' needs switch_kappa")
+      if (.not. switch_kappa > 1) call fatal_error("dual_problem: switch_kappa must be > 1")
+      self%switch_kappa = switch_kappa
+      self%prec_weights = weights
+      call self%op%init_preconditioner(self%prec, 'lumped', weights)
+    else
+      call self%op%init_preconditioner(self%prec, kind, weights)
+    end if
     if (allocated(self%wp)) deallocate (self%wp, self%wq, self%wm)
     allocate (self%wp(self%n), self%wq(self%n), self%wm(self%n))
   end subroutine set_preconditioner
+
+  !> 'auto' before its switch: the face condition estimate is watched.
+  logical function watches_condition(self)
+    class(dual_problem_t), intent(in) :: self
+    watches_condition = self%auto_pending
+  end function watches_condition
+
+  !> 'auto': the first time the face condition estimate kappa (maximum over
+  !> the ranks: one reduction, so that every rank decides alike) exceeds
+  !> switch_kappa, set up the Dirichlet M^{-1} in place of the lumped one
+  !> (timer 'preconditioner setup'; the log says when) and answer
+  !> switched = .true.; MPRGP then restarts its CG direction. Collective.
+  subroutine condition_estimate(self, kappa, switched)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: kappa
+    logical, intent(out) :: switched
+    real(dp) :: k_all
+    character(len=200) :: line
+    integer :: ierr
+    switched = .false.
+    if (.not. self%auto_pending) return
+    call MPI_Allreduce(kappa, k_all, 1, MPI_REAL_DP, MPI_MAX, self%comm, ierr)
+    if (.not. k_all > self%switch_kappa) return
+    call timer_start('preconditioner setup')
+    call self%prec%free()
+    call self%op%init_preconditioner(self%prec, 'dirichlet', self%prec_weights)
+    call timer_stop('preconditioner setup')
+    self%auto_pending = .false.
+    self%switch_at = self%n_products
+    self%switch_estimate = k_all
+    switched = .true.
+    write (line, '(a,i0,a,es10.3,a,es10.3,a)') "preconditioner 'auto': lumped -> dirichlet after ", &
+      self%n_products, ' Hessian products (face condition estimate ', k_all, ' > ', self%switch_kappa, ')'
+    call log_message(trim(line))
+  end subroutine condition_estimate
 
   logical function has_preconditioner(self)
     class(dual_problem_t), intent(in) :: self
@@ -274,6 +347,7 @@ contains
     call self%op%apply_f(p, self%fpx)
     call self%apply_projector(self%fpx, q, .false.)
     q(1:self%n) = q(1:self%n)/self%scale
+    self%n_products = self%n_products + 1
   end subroutine face_operator
 
   !> z = s M^{-1} r (FETI's PCPG preconditioner without the projections of
@@ -474,6 +548,8 @@ contains
     if (allocated(self%last_g)) deallocate (self%last_g, self%last_z, self%x_g, self%x_z)
     call self%prec%free()
     self%use_prec = .false.
+    self%auto_mode = .false.
+    self%auto_pending = .false.
     if (allocated(self%wp)) deallocate (self%wp, self%wq, self%wm)
     call self%face_free()
     self%op => null()

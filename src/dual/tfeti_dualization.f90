@@ -55,6 +55,7 @@ module tfeti_dualization
     procedure :: sizes
     procedure :: rho
     procedure :: preconditioner_name
+    procedure :: preconditioner_switch
     procedure :: free
   end type tfeti_dualization_t
 
@@ -80,6 +81,7 @@ contains
     type(MPI_Comm), intent(in) :: comm
     type(feti_sizes_t) :: n
     character(len=200) :: line
+    character(len=name_len) :: kind
     integer :: nranks, ierr
 
     call this%free()
@@ -104,10 +106,23 @@ contains
     call this%dual%init(this%op, p%solver%rho_scale, p%solver%stopping)
     call timer_stop('dual setup')
     if (p%solver%preconditioner /= 'none') then
+      kind = p%solver%preconditioner
+      ! 'auto' with hybrid TFETI (&mesh cluster): no Dirichlet preconditioner
+      ! for clusters, so 'auto' is 'lumped' there
+      if (kind == 'auto' .and. this%op%hybrid_units()) kind = 'lumped'
       call timer_start('preconditioner setup')
-      call this%dual%set_preconditioner(p%solver%preconditioner, subdomain_weights(p, this%op))
+      call this%dual%set_preconditioner(kind, subdomain_weights(p, this%op), p%solver%preconditioner_switch)
       call timer_stop('preconditioner setup')
-      call log_message('preconditioner (MPRGP in the face): '//trim(p%solver%preconditioner))
+      if (kind == 'auto') then
+        write (line, '(a,es10.3,a)') "preconditioner (MPRGP in the face): auto (lumped; dirichlet once the "// &
+          'face condition estimate exceeds ', p%solver%preconditioner_switch, ')'
+        call log_message(trim(line))
+      else if (kind /= p%solver%preconditioner) then
+        call log_message("preconditioner (MPRGP in the face): lumped ('auto' with hybrid TFETI, "// &
+                         'which has no Dirichlet preconditioner)')
+      else
+        call log_message('preconditioner (MPRGP in the face): '//trim(kind))
+      end if
     end if
     write (line, '(a,es10.3,a,es10.3)') '||P F P|| ~ ', this%op%norm_pfp(), ', rho = ', this%dual%rho
     call log_message(line)
@@ -137,6 +152,17 @@ contains
     character(len=:), allocatable :: name
     name = this%dual%preconditioner_name()
   end function preconditioner_name
+
+  !> `&solver preconditioner = 'auto'`: whether it switched to 'dirichlet',
+  !> at which count of Hessian products and on which face condition estimate
+  !> (at = -1, estimate = 0 when it did not, or for the other variants).
+  subroutine preconditioner_switch(this, at, estimate)
+    class(tfeti_dualization_t), intent(in) :: this
+    integer, intent(out) :: at
+    real(dp), intent(out) :: estimate
+    at = int(this%dual%switch_at)
+    estimate = this%dual%switch_estimate
+  end subroutine preconditioner_switch
 
   !> The dual QP for the solver.
   function problem(this) result(qp)

@@ -112,6 +112,7 @@ module feti_operators
     procedure :: coarse_solves
     procedure :: coarse_factor
     procedure :: dirichlet_fixes_rigid_modes
+    procedure :: hybrid_units
     procedure :: free
   end type feti_t
 
@@ -525,6 +526,13 @@ contains
     class(feti_t), intent(in) :: this
     dirichlet_fixes_rigid_modes = this%dirichlet_holds
   end function dirichlet_fixes_rigid_modes
+
+  !> Hybrid TFETI (&mesh cluster): the FETI units are clusters of subdomains
+  !> (no Dirichlet preconditioner for them).
+  logical function hybrid_units(this)
+    class(feti_t), intent(in) :: this
+    hybrid_units = this%hybrid
+  end function hybrid_units
 
   subroutine free(this)
     class(feti_t), intent(inout) :: this

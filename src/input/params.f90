@@ -112,8 +112,10 @@ module params
     !> SMALBE's stopping test: 'violation' (largest constraint violation in
     !> displacement units, relative) | 'norm' (the classical 2-norm test)
     character(len=name_len) :: stopping = 'violation'
-    !> MPRGP preconditioned in the face (and PCPG): 'none' | 'lumped' | 'dirichlet'
+    !> MPRGP preconditioned in the face (and PCPG): 'none' | 'lumped' | 'dirichlet' | 'auto'
+    !> ('lumped' until the face condition estimate exceeds preconditioner_switch, then 'dirichlet')
     character(len=name_len) :: preconditioner = 'lumped'
+    real(dp) :: preconditioner_switch = 100   !< 'auto': the face condition estimate that switches
     logical :: monitor = .true.               !< one line per outer iteration
   end type solver_params_t
 
@@ -497,7 +499,7 @@ contains
     real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, rho_growth, &
                 rho_contraction, rho_stall, coarse_blr, polish_settle, polish_loose, &
-                regularization, active_tol, kkt_tol
+                regularization, active_tol, kkt_tol, preconditioner_switch
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
                                m_no_step, f_action, f_storage, share_subdomains, preconditioner
@@ -513,7 +515,7 @@ contains
       polish_rounds, polish_release, polish_settle, polish_loose, &
       power_iterations, coarse, coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
       f_action, f_storage, share_subdomains, &
-      regularization, scaling, stopping, preconditioner, monitor
+      regularization, scaling, stopping, preconditioner, preconditioner_switch, monitor
     namelist /reconstruction/ method, active_tol, kkt_tol
     character(len=name_len) :: run_name
     namelist /output/ directory, run_name, write_hdf5, write_report
@@ -563,7 +565,7 @@ contains
         coarse_placement = s%coarse_placement; coarse_ranks = s%coarse_ranks
         coarse_blr = s%coarse_blr; coarse_ooc = s%coarse_ooc
         regularization = s%regularization; scaling = s%scaling; stopping = s%stopping; monitor = s%monitor
-        preconditioner = s%preconditioner
+        preconditioner = s%preconditioner; preconditioner_switch = s%preconditioner_switch
       end associate
       if (reading) read (group_text, nml=solver, iostat=status, iomsg=msg)
       if (.not. reading) write (written, nml=solver, delim='quote', iostat=status, iomsg=msg)
@@ -601,7 +603,7 @@ contains
                                  lower(share_subdomains), &
                                  lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, &
                                  regularization, lower(scaling), lower(stopping), lower(preconditioner), &
-                                 monitor)
+                                 preconditioner_switch, monitor)
     case ('reconstruction')
       p%reconstruction = reconstruction_params_t(lower(method), active_tol, kkt_tol)
     case ('output')
@@ -734,8 +736,11 @@ contains
         call fail('solver', 'scaling', "must be 'none' or 'young'", s%scaling)
       if (.not. one_of(s%stopping, [character(len=9) :: 'violation', 'norm'])) &
         call fail('solver', 'stopping', "must be 'violation' or 'norm'", s%stopping)
-      if (.not. one_of(s%preconditioner, [character(len=9) :: 'none', 'lumped', 'dirichlet'])) &
-        call fail('solver', 'preconditioner', "must be 'none', 'lumped' or 'dirichlet'", s%preconditioner)
+      if (.not. one_of(s%preconditioner, [character(len=9) :: 'none', 'lumped', 'dirichlet', 'auto'])) &
+        call fail('solver', 'preconditioner', "must be 'none', 'lumped', 'dirichlet' or 'auto'", s%preconditioner)
+      if (.not. (s%preconditioner_switch > 1 .and. s%preconditioner_switch <= huge(1.0_dp))) &
+        call fail('solver', 'preconditioner_switch', 'must be > 1 (a condition number)', &
+                  reals([s%preconditioner_switch]))
     end associate
     associate (r => p%reconstruction)
       if (.not. one_of(r%method, [character(len=8) :: 'new', 'standard', 'both'])) &

@@ -41,7 +41,8 @@ contains
     type(feti_sizes_t) :: n
     character(len=:), allocatable :: memory
     integer(i8) :: f_bytes
-    real(dp) :: f_seconds, flops(2), f_flops
+    real(dp) :: f_seconds, flops(2), f_flops, switch_estimate
+    integer :: switch_at
     integer :: nranks, ierr
 
     op => dual%operators()
@@ -80,6 +81,15 @@ contains
     ! coefficients; null when no run had 2 steps)
     call js%add('preconditioner', dual%preconditioner_name())
     call js%add('preconditioner_applications', int(solver%n_preconditioner, i8))
+    ! 'auto': the Hessian count at the switch to 'dirichlet' and the estimate that made it (null: none)
+    call dual%preconditioner_switch(switch_at, switch_estimate)
+    if (switch_at >= 0) then
+      call js%add('preconditioner_switch_at', int(switch_at, i8))
+      call js%add('preconditioner_switch_estimate', switch_estimate)
+    else
+      call js%add_null('preconditioner_switch_at')
+      call js%add_null('preconditioner_switch_estimate')
+    end if
     ! SMALBE's polish (exact face solve; its products are in hessian_multiplications)
     call js%add_each([character(len=24) :: 'polish_window', 'polish_count', 'polish_hessian', 'polish_cg_steps', &
                       'polish_accepted'], int([solver%polish_window, solver%n_polish, solver%n_polish_hessian, &

@@ -152,6 +152,7 @@ module mprgp
     integer(ip) :: n_best = 0                  !< iteration of the last call at which it was reached
     integer(ip) :: n_preconditioner = 0        !< preconditioner applications of the last call
     logical :: preconditioned = .false.        !< the last call used the problem's preconditioner
+    integer(ip) :: n_switches = 0              !< times the problem changed its preconditioner (all calls)
     type(cg_ritz_t) :: ritz                    !< Ritz values of the CG runs (reset by the caller / solve)
     real(dp), allocatable, private :: p(:), ap(:), w_phi(:), w_x(:), w_g(:)
   contains
@@ -384,6 +385,12 @@ contains
             ! z and the conjugation wait until a CG step follows (see the module)
             call split_stats(self, problem, x, g, stats)
             conjugate_pending = .true.
+            if (preconditioner_switched(self, problem)) then
+              ! a new preconditioner: the next CG step starts a new run (p = z)
+              conjugate_pending = .false.
+              restart = .true.
+              call self%ritz%end_run()
+            end if
           else
             call split_stats(self, problem, x, g, stats, self%ap)
             if (.not. conjugated(self, problem, x, g, stats(4)/pap)) exit
@@ -434,6 +441,20 @@ contains
     call self%ritz%add_beta(-beta_cg)
     call conjugate(problem, x, d, beta_cg, self%p)
   end function conjugated
+
+  !> After a preconditioned CG step: when the problem watches the condition
+  !> of its preconditioned face operator, hand it the running estimate
+  !> (the largest theta_max/theta_min of this solve's closed runs and of the
+  !> open one); .true. when it changed its preconditioner (the caller
+  !> restarts the CG direction). Collective while the problem watches.
+  logical function preconditioner_switched(self, problem) result(switched)
+    class(mprgp_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    switched = .false.
+    if (.not. problem%watches_condition()) return
+    call problem%condition_estimate(max(self%ritz%max_ratio, self%ritz%current_ratio()), switched)
+    if (switched) self%n_switches = self%n_switches + 1
+  end function preconditioner_switched
 
   !> v = R_F M_A^{-1} R_F g: the problem's preconditioner applied to the free
   !> gradient phi, restricted to the free set (0 where x_i is at its bound).

@@ -27,6 +27,14 @@
 !> provides `precondition(r, z)`, z = M_A^{-1} r with M_A^{-1} symmetric
 !> positive definite (an approximate inverse of A); MPRGP then uses it in the
 !> face (its CG steps; mprgp). The QP layer knows nothing else of it.
+!> A problem may change its preconditioner during a solve (an adaptive
+!> choice, `&solver preconditioner = 'auto'`): while `watches_condition()`
+!> is true, MPRGP hands it after every preconditioned CG step the running
+!> condition estimate of the preconditioned face operator (the Ritz values
+!> of the CG coefficients, the same on every rank: ritz_values), through
+!> `condition_estimate(kappa, switched)`; switched = .true. says that the
+!> preconditioner changed, and MPRGP restarts its CG direction (as on a
+!> change of the face). By default nobody watches and nothing changes.
 !>
 !> Face solver (optional, SMALBE's polish step): a problem with an equality
 !> constraint whose `has_face_solver()` is true can restrict C to the free
@@ -124,6 +132,8 @@ module qp_problem
     procedure :: eq_measure => default_eq_measure
     procedure :: has_preconditioner => default_has_preconditioner
     procedure :: precondition => default_precondition
+    procedure :: watches_condition => default_watches_condition
+    procedure :: condition_estimate => default_condition_estimate
     procedure :: has_face_solver => default_has_face_solver
     procedure :: face_always_regular => default_face_always_regular
     procedure :: face_init => default_face_init
@@ -290,6 +300,25 @@ contains
     real(dp), intent(out) :: z(:)
     z(1:self%n) = r(1:self%n)
   end subroutine default_precondition
+
+  !> False: the preconditioner never changes. Local, no communication.
+  logical function default_watches_condition(self)
+    class(qp_problem_t), intent(in) :: self
+    default_watches_condition = .false.
+    if (self%n < 0) default_watches_condition = .true.   ! never: keeps self referenced
+  end function default_watches_condition
+
+  !> The running condition estimate kappa of the preconditioned face
+  !> operator (globally reduced); switched = .true. when the problem changed
+  !> its preconditioner in response. Never by default. Collective when
+  !> watches_condition() is true.
+  subroutine default_condition_estimate(self, kappa, switched)
+    class(qp_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: kappa
+    logical, intent(out) :: switched
+    switched = .false.
+    if (self%n < 0 .and. kappa < 0) switched = .true.   ! never: keeps the arguments referenced
+  end subroutine default_condition_estimate
 
   !> False: no face solver (SMALBE never polishes). Local, no communication.
   logical function default_has_face_solver(self)
