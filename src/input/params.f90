@@ -114,7 +114,7 @@ module params
     character(len=name_len) :: stopping = 'violation'
     !> MPRGP preconditioned in the face (and PCPG): 'none' | 'lumped' | 'dirichlet' | 'auto'
     !> ('lumped' until the face condition estimate exceeds preconditioner_switch, then 'dirichlet')
-    character(len=name_len) :: preconditioner = 'lumped'
+    character(len=name_len) :: preconditioner = 'auto'
     real(dp) :: preconditioner_switch = 100   !< 'auto': the face condition estimate that switches
     logical :: monitor = .true.               !< one line per outer iteration
   end type solver_params_t

@@ -46,6 +46,7 @@ module face_solve
   use kinds, only: dp, ip, MPI_INT_IP
   use qp_problem, only: qp_problem_t, no_lower_bound
   use mprgp, only: ensure_size
+  use ritz_values, only: cg_ritz_t
   use mpi_f08, only: MPI_Allreduce, MPI_SUM
   implicit none
   private
@@ -62,6 +63,9 @@ module face_solve
     integer(ip) :: n_hessian = 0       !< Hessian products of the last run
     integer(ip) :: n_steps = 0         !< CG steps of the last run
     integer(ip) :: n_precondition = 0  !< preconditioner applications of the last run
+    !> Ritz values of the CG runs (all runs since the object was made): the running estimate
+    !> a problem that watches its face condition (qp_problem) is handed after every step
+    type(cg_ritz_t) :: ritz
     real(dp) :: measure0 = 0           !< stopping measure of r at the start
     real(dp) :: measure = 0            !< ... at the end
     logical :: reached = .false.       !< measure <= target
@@ -163,7 +167,7 @@ contains
     integer(ip), intent(in), optional :: max_steps_trusted
     real(dp) :: rz, rz_new, pq, alpha, loose_at, ctol, aim
     integer(ip) :: n, cap
-    logical :: prec, check
+    logical :: prec, check, switched
 
     n = problem%n
     call ensure_size(self%r, n)
@@ -209,6 +213,7 @@ contains
       call precondition(self%z)
       self%p = self%z
       rz = problem%dot(self%r, self%z)
+      call self%ritz%begin_run()
       do while (self%n_steps < cap)
         call problem%face_operator(self%p, self%q)
         self%n_hessian = self%n_hessian + 1
@@ -219,6 +224,7 @@ contains
           exit
         end if
         alpha = rz/pq
+        call self%ritz%add_alpha(alpha)
         x(1:n) = x(1:n) + alpha*self%p
         g(1:n) = g(1:n) + alpha*self%q
         call face_project(problem, free, g, self%r, muhat)
@@ -255,11 +261,23 @@ contains
           end if
           if (self%aborted) exit
         end if
+        ! a problem that watches its face condition may change its preconditioner
+        ! here (qp_problem; &solver preconditioner = 'auto'): then CG restarts, p = z
+        switched = .false.
+        if (prec .and. problem%watches_condition()) &
+          call problem%condition_estimate(max(self%ritz%max_ratio, self%ritz%current_ratio()), switched)
         call precondition(self%z)
         rz_new = problem%dot(self%r, self%z)
-        self%p = self%z + (rz_new/rz)*self%p
+        if (switched) then
+          self%p = self%z
+          call self%ritz%begin_run()
+        else
+          call self%ritz%add_beta(rz_new/rz)
+          self%p = self%z + (rz_new/rz)*self%p
+        end if
         rz = rz_new
       end do
+      call self%ritz%end_run()
     end if
     ! 3. the face multiplier mu = -(C_F C_F^T)^{-1} C_F g_F: muhat holds the coefficients of
     ! the last projection of g, made after g last changed (the preconditioner's go to cz)

@@ -4,7 +4,7 @@
     run_case.py --program feticontact --mpiexec mpiexec --ranks 2 --input inputs/block.nml \
         --workdir DIR [--set group:variable=value ...] [--expect-exit N] [--expect-message REGEX] \
         [--check block_exact:TOL] [--check report] [--check xdmf] [--check same_as:DIR:TOL]
-        [--check alpha_agree:TOL]
+        [--check alpha_agree:TOL] [--check switch:yes|no[:seen]] [--check same_switch_as:DIR]
 
 The input file is copied with the --set overrides merged into its groups and
 with &output directory pointing into DIR. Every check derives its expected
@@ -190,6 +190,43 @@ def check_alpha_agree(outdir, tol):
     check(d is not None and d <= tol, "||alpha_new - alpha_standard|| / ||alpha_standard|| = %s <= %.1e" % (d, tol))
 
 
+def solver_report(outdir):
+    with open(os.path.join(outdir, "report.json")) as f:
+        return json.load(f)["solver"]
+
+
+def check_switch(outdir, expected, seen=False):
+    """&solver preconditioner = 'auto': whether it switched to 'dirichlet' (report.json
+    solver.preconditioner_switch_at not null, and the preconditioner in use at the end).
+    seen: the run had CG runs long enough for a condition estimate (so that 'no' means the
+    estimate stayed below the threshold, not that there was none)."""
+    s = solver_report(outdir)
+    at = s.get("preconditioner_switch_at")
+    if expected == "yes":
+        check(at is not None and at >= 0 and s.get("preconditioner") == "dirichlet",
+              "preconditioner 'auto' switched to dirichlet (at Hessian product %s, estimate %s)"
+              % (at, s.get("preconditioner_switch_estimate")))
+        est = s.get("preconditioner_switch_estimate")
+        check(at is not None and at <= s["hessian_multiplications"], "the switch point %s is within the run's %d products"
+              % (at, s["hessian_multiplications"]))
+        check(est is not None and est > 1, "the switch estimate %s is a condition number > 1" % est)
+    else:
+        check(at is None and s.get("preconditioner") == "lumped",
+              "preconditioner 'auto' stayed lumped (switch at %s, in use %s, face condition estimate %s)"
+              % (at, s.get("preconditioner"), s.get("face_condition_estimate")))
+        if seen:
+            check(s.get("face_condition_estimate") is not None, "a face condition estimate was made (%s CG runs)"
+                  % s.get("cg_runs"))
+
+
+def check_same_switch_as(outdir, other):
+    """The switch point is the same Hessian count as in another run (e.g. another rank count)."""
+    a, b = solver_report(outdir), solver_report(other)
+    check(a.get("preconditioner_switch_at") == b.get("preconditioner_switch_at"),
+          "same switch point as %s: %s == %s" % (other, a.get("preconditioner_switch_at"),
+                                                  b.get("preconditioner_switch_at")))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--program", required=True)
@@ -231,6 +268,10 @@ def main():
             check_alpha_agree(outdir, float(rest[0]))
         elif kind == "same_as":
             check_same_as(outdir, os.path.join(rest[0], "out"), float(rest[1]))
+        elif kind == "switch":
+            check_switch(outdir, rest[0], len(rest) > 1 and rest[1] == "seen")
+        elif kind == "same_switch_as":
+            check_same_switch_as(outdir, os.path.join(rest[0], "out"))
         else:
             check(False, "unknown check %s" % kind)
     print("%d passed, %d failed" % (len(PASSED), len(FAILURES)))

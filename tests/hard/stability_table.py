@@ -17,7 +17,9 @@ repeatable) or --variants none,lumped,dirichlet (&solver preconditioner = 'none'
 every input runs once per variant as <name>@<variant>, and the table gains the
 columns variant, Hessian/outer (products per outer iteration), contraction (geometric
 mean of ||C x_k|| / ||C x_(k-1)|| over the second half of the outer iterations,
-report.json solver.contraction_late) and KKT (pass/fail). Each variant is first
+report.json solver.contraction_late), KKT (pass/fail) and switch at (report.json
+solver.preconditioner_switch_at: the Hessian count at which `preconditioner = 'auto'`
+switched to 'dirichlet', - if it did not). Each variant is first
 checked with `feticontact --check`: a variable or value the program rejects stops the
 tool with the program's message.
 """
@@ -92,7 +94,8 @@ def run_one(args, path, variant=None):
                    total=t["total"]["max"], solve=t["solve"]["max"], alpha_difference=r["reconstruction"].get(
                        "alpha_difference"), kkt_passed=k.get("passed"), solver_variant=s.get("variant"),
                    hessian_per_outer=s.get("hessian_per_outer_mean"), contraction=s.get("contraction_late"),
-                   contraction_median=s.get("contraction_median"))
+                   contraction_median=s.get("contraction_median"),
+                   switch_at=s.get("preconditioner_switch_at"))
     else:
         lines = [l for l in out.splitlines() if l.strip()]
         row["message"] = lines[-1] if lines else "no output"
@@ -107,7 +110,7 @@ def run_one(args, path, variant=None):
 def fmt(row, with_variants=False):
     if "kkt" not in row:
         return "| %s | exit %s | | | | | | | | | | %s |%s" % (row["name"], row["exit"], row["message"],
-                                                               " | | | |" if with_variants else "")
+                                                               " | | | | |" if with_variants else "")
     err = "%.1e" % row["error"] if "error" in row else "-"
     text = "| %s | %d | %s | %d | %d | %d | %s | %.2f | %.2f | %s | %d/%d |" % (
         row["name"], row["subdomains"], "yes" if row["exit"] == 0 else "exit %s" % row["exit"], row["outer"],
@@ -116,9 +119,11 @@ def fmt(row, with_variants=False):
     if with_variants:
         q = row.get("contraction")
         hpo = row.get("hessian_per_outer")
-        text += " %s | %s | %s | %s |" % (row["variant"], "%.1f" % hpo if hpo is not None else "-",
-                                          "%.3f" % q if q is not None else "-",
-                                          {True: "pass", False: "fail"}.get(row.get("kkt_passed"), "-"))
+        sw = row.get("switch_at")
+        text += " %s | %s | %s | %s | %s |" % (row["variant"], "%.1f" % hpo if hpo is not None else "-",
+                                               "%.3f" % q if q is not None else "-",
+                                               {True: "pass", False: "fail"}.get(row.get("kkt_passed"), "-"),
+                                               sw if sw is not None else "-")
     return text
 
 
@@ -127,8 +132,8 @@ HEADER = ("| case | subdomains | converged | outer | inner | Hessian | KKT: equi
           "|---|---|---|---|---|---|---|---|---|---|---|")
 VARIANT_HEADER = ("| case | subdomains | converged | outer | inner | Hessian | KKT: equil. equal. feas. dual-feas. "
                   "compl. | total [s] | solve [s] | error vs exact | active/contact rows | variant | Hessian/outer "
-                  "| contraction | KKT |\n"
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+                  "| contraction | KKT | switch at |\n"
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def main():
