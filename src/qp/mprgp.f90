@@ -87,6 +87,10 @@
 !> values and the largest ratio theta_max/theta_min of a run, over the
 !> calls since the caller reset it (SMALBE: one solve). Without
 !> preconditioner the operator is A on the face, with it R_F M_A^{-1} R_F A.
+!> A problem that watches it (qp_problem: watches_condition; the FETI dual
+!> with `&solver preconditioner = 'auto'`) is handed the running estimate
+!> after every preconditioned CG step and may change its preconditioner;
+!> then the next CG step starts a new run (p = z), as after a face change.
 !>
 !> Work vectors (5 of the local length) are allocated on the first call and
 !> kept (no allocation in the iteration).
