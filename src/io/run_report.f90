@@ -107,6 +107,14 @@ contains
       end if
       call js%add_each([character(len=16) :: 'cg_runs', 'longest_cg_run'], int([rz%n_runs, rz%longest], i8))
     end associate
+    ! the same estimate from the polish's face CG runs (null: none of 2 steps)
+    associate (rz => solver%polish%ritz)
+      if (rz%n_runs > 0) then
+        call js%add('polish_condition_estimate', rz%max_ratio)
+      else
+        call js%add_null('polish_condition_estimate')
+      end if
+    end associate
     call js%end_object()
     call js%begin_object('kkt')
     call js%add_each([character(len=16) :: 'equilibrium', 'gluing', 'dirichlet', 'penetration', 'equality', &
