@@ -195,6 +195,9 @@ contains
     call timer_stop('solve')
     seconds = [timer_seconds('solve'), timer_seconds('F action') - before(1), timer_seconds('coarse solve') - before(2)]
     call MPI_Allreduce(MPI_IN_PLACE, seconds, 3, MPI_REAL_DP, MPI_MAX, this%op%comm(), ierr)
+    ! 'auto' that did not switch says so (the switch itself is logged where it happens)
+    if (this%dual%auto_mode .and. this%dual%switch_at < 0) &
+      call log_message("preconditioner 'auto': no switch (lumped throughout)")
   end subroutine solve
 
   !> The penalty rho of Eq. (8), unscaled.
