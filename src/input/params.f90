@@ -793,14 +793,15 @@ contains
   !> Clusters pay where the coarse problem dominates: subdomains of at most
   !> `auto_max_nel` = 2 elements per direction (H/h <= 2), at least
   !> 512 (H/h)^3 of them (H/h the largest entry of nel: 512 subdomains of one
-  !> element, 4096 of 2^3; measured to lose at 64 of one element and at 512
-  !> and 1728 of 2^3). Then, per direction, the largest divisor c of nsub with
-  !> nel*c <= `auto_cluster_edge` = 4 elements along the cluster's edge,
-  !> reduced (largest entry first) until every rank holds at least
-  !> `auto_clusters_per_rank` clusters (a balance guard: a cluster lives on
-  !> one rank). [1, 1, 1] (plain TFETI) whenever a requirement of hybrid TFETI
-  !> fails (box decomposition, uniform material, no Dirichlet preconditioner,
-  !> implicit F) or the rule does not fire; `reason` says which.
+  !> element, 4096 of 2^3; measured to lose at 64 of one element and at 64
+  !> and 512 of 2^3, to break even at 1728 of 2^3). Then, per direction, the
+  !> largest divisor c of nsub with nel*c <= `auto_cluster_edge` = 4
+  !> elements along the cluster's edge, reduced (largest entry first) until
+  !> every rank holds at least `auto_clusters_per_rank` = 4 clusters (a
+  !> balance guard, not measured: a cluster lives on one rank). [1, 1, 1]
+  !> (plain TFETI) whenever a requirement of hybrid TFETI fails (box
+  !> decomposition, uniform material, no Dirichlet preconditioner, implicit
+  !> F) or the rule does not fire; `reason` says which.
   function auto_cluster(p, nranks, reason) result(c)
     type(params_t), intent(in) :: p
     integer, intent(in) :: nranks
