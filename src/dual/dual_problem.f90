@@ -31,8 +31,8 @@
 !> 'auto' (set_preconditioner with a switch threshold kappa_s): M^{-1} starts
 !> as 'lumped'; MPRGP reports the running Ritz estimate of the condition of
 !> R_F M_A^{-1} R_F A after every preconditioned CG step
-!> (qp_problem: condition_estimate), and the first time its maximum over
-!> the ranks exceeds kappa_s the Dirichlet M^{-1} is set up (once) and used
+!> (qp_problem: condition_estimate; the same on every rank), and the first
+!> time it exceeds kappa_s the Dirichlet M^{-1} is set up (once) and used
 !> from then on (MPRGP restarts its CG direction). `switch_at` is the count
 !> of Hessian products (hessian and face_operator calls) at the switch,
 !> -1 if none (docs/THEORY.md "Adaptive preconditioner").
@@ -243,21 +243,23 @@ contains
     watches_condition = self%auto_pending
   end function watches_condition
 
-  !> 'auto': the first time the face condition estimate kappa (maximum over
-  !> the ranks: one reduction, so that every rank decides alike) exceeds
+  !> 'auto': the first time the face condition estimate kappa exceeds
   !> switch_kappa, set up the Dirichlet M^{-1} in place of the lumped one
   !> (timer 'preconditioner setup'; the log says when) and answer
-  !> switched = .true.; MPRGP then restarts its CG direction. Collective.
+  !> switched = .true.; the solver then restarts its CG direction. kappa
+  !> comes from the CG coefficients, globally reduced dot products that are
+  !> the same on every rank (qp_problem's correctly rounded sums, on which
+  !> the solvers already branch), so every rank decides alike without a
+  !> reduction of its own. Collective (the set-up).
   subroutine condition_estimate(self, kappa, switched)
     class(dual_problem_t), intent(inout) :: self
     real(dp), intent(in) :: kappa
     logical, intent(out) :: switched
     real(dp) :: k_all
     character(len=200) :: line
-    integer :: ierr
     switched = .false.
     if (.not. self%auto_pending) return
-    call MPI_Allreduce(kappa, k_all, 1, MPI_REAL_DP, MPI_MAX, self%comm, ierr)
+    k_all = kappa
     if (.not. k_all > self%switch_kappa) return
     call timer_start('preconditioner setup')
     call self%prec%free()
