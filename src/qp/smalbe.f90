@@ -82,7 +82,9 @@
 !>    gradient has the wrong sign are also freed, primal-dual active set
 !>    rounds, see polish_step; with polish_loose > 0 a face solve that may be
 !>    followed by another round stops at its loose check when the set would
-!>    change, face_solve). polish_settle > 0: an outer iteration counts as
+!>    change, face_solve; with polish_predict > 0 a round that projected at
+!>    least that many rows and released none also makes as many of the free
+!>    rows nearest their bound active, predicted_rows). polish_settle > 0: an outer iteration counts as
 !>    settled when the set changed on at most that fraction of the bounded
 !>    rows; a polish given up at its first face then does not count toward
 !>    smalbe_polish_max, and the next waits until the products have doubled.
@@ -856,6 +858,9 @@ contains
   !> one ends the polish (SMALBE goes on from the feasible pair). Equal change
   !> counts on new sets go on (session 8: cube_h4_n64 with polish_settle =
   !> 0.15 changed 24, 4, 4, ... rows on its way to the solution's face).
+  !> With polish_predict > 0 a round that projected k >= polish_predict rows
+  !> and released none also puts the k free rows of smallest slack onto their
+  !> bound (predicted_rows; the next round's release corrects wrong ones).
   !> Collective.
   subroutine polish_step(self, problem, x, outer, restored)
     class(smalbe_t), intent(inout) :: self
