@@ -19,6 +19,7 @@ program feticontact
 
   type(params_t) :: p
   character(len=path_len) :: arg, file
+  character(len=300) :: line
   logical :: check_only
   integer :: i, ierr, nranks, status
   logical :: halting(size(ieee_usual))
@@ -62,6 +63,10 @@ program feticontact
   call read_params(file, MPI_COMM_WORLD, p)
   call log_section('feticontact: settings used')
   if (log_is_root()) call echo_params(p, output_unit)
+  if (p%mesh%cluster_auto) then
+    write (line, '(a,3(1x,i0),a)') '&mesh cluster (automatic):', p%mesh%cluster, ' -- '//trim(p%mesh%cluster_choice)
+    call log_message(line)
+  end if
   call log_message(blas_log_line())
 
   if (.not. check_only) call run_contact_case(p, MPI_COMM_WORLD, status)

@@ -162,8 +162,9 @@ contains
       integer :: nranks, c
       character(len=300) :: msg
       call MPI_Comm_size(comm, nranks, ierr)
+      ! units = clusters; an unresolved automatic cluster 0,0,0 (params made in code) is plain TFETI
       call choose_coarse_ranks(p%solver%coarse_ranks, p%solver%coarse_placement, nranks, &
-                               int(product(int(p%mesh%nsub/p%mesh%cluster, i8)), ip), c, msg)
+                               int(product(int(p%mesh%nsub/max(p%mesh%cluster, 1_ip), i8)), ip), c, msg)
       if (len_trim(msg) > 0) call collective_error(msg, comm, exit_input_error)
     end subroutine check_coarse_ranks
   end subroutine setup

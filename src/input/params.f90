@@ -8,13 +8,14 @@
 !> broadcast, and on error every rank exits together with status 2.
 !> Every variable is documented in docs/INPUT.md.
 module params
-  use kinds, only: dp, ip, path_len, name_len
+  use kinds, only: dp, ip, i8, path_len, name_len
   use errors, only: collective_error, exit_input_error, fatal_error
-  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Bcast, MPI_BYTE, MPI_INTEGER, MPI_CHARACTER
+  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast, MPI_BYTE, MPI_INTEGER, MPI_CHARACTER
   implicit none
   private
 
   public :: read_params, check_params, echo_params, default_params, param_items, group_names
+  public :: auto_cluster, resolve_cluster
 
   integer, parameter :: msg_len = 1024
 
@@ -26,11 +27,17 @@ module params
     integer(ip) :: distortion_seed = 1        !< seed of the node offsets
     character(len=name_len) :: decomposition = 'box'  !< 'box' | 'metis'
     character(len=name_len) :: mapping = 'block'      !< subdomains to ranks: 'block' | 'metis'
-    !> hybrid TFETI: subdomains per cluster per direction (1,1,1: plain TFETI)
-    integer(ip) :: cluster(3) = [1, 1, 1]
+    !> hybrid TFETI: subdomains per cluster per direction (1,1,1: plain TFETI;
+    !> 0,0,0: chosen by `auto_cluster` when `read_params` reads the input; a
+    !> params_t made in code and never resolved keeps 0,0,0 = plain TFETI)
+    integer(ip) :: cluster(3) = [0, 0, 0]
     !> decomposition = 'metis': elements per block edge of the block grid METIS
     !> partitions (0: automatic, see src/mesh/decomposition.f90)
     integer(ip) :: metis_block = 0
+    !> not namelist variables: set by `resolve_cluster` (read_params) when
+    !> `cluster` was 0,0,0: then `cluster` holds the choice, and the reason
+    logical :: cluster_auto = .false.
+    character(len=160) :: cluster_choice = ''
   end type mesh_params_t
 
   type, public :: material_params_t
@@ -172,16 +179,21 @@ contains
     character(len=*), intent(in) :: file
     type(MPI_Comm), intent(in) :: comm
     type(params_t), intent(out) :: p
-    integer :: rank, ierr, status
+    integer :: rank, nranks, ierr, status
     character(len=msg_len) :: msg
 
     call MPI_Comm_rank(comm, rank, ierr)
+    call MPI_Comm_size(comm, nranks, ierr)
     status = 0
     msg = ''
     p = params_t()
     if (rank == 0) then
       call read_file(file, p, status, msg)
       if (status == 0) call check_params(p, status, msg)
+      if (status == 0) then
+        call resolve_cluster(p, nranks)
+        call check_params(p, status, msg)     ! (the automatic choice meets every check by construction)
+      end if
     end if
     call MPI_Bcast(status, 1, MPI_INTEGER, 0, comm, ierr)
     if (status /= 0) then
@@ -629,10 +641,11 @@ contains
         call fail('mesh', 'decomposition', "must be 'box' or 'metis'", m%decomposition)
       if (.not. one_of(m%mapping, [character(len=8) :: 'block', 'metis'])) &
         call fail('mesh', 'mapping', "must be 'block' or 'metis'", m%mapping)
-      if (any(m%cluster < 1)) call fail('mesh', 'cluster', 'each entry must be >= 1', ints(m%cluster))
+      if (.not. (all(m%cluster == 0) .or. all(m%cluster >= 1))) call fail('mesh', 'cluster', &
+        'each entry must be >= 1, or all three 0 (automatic choice)', ints(m%cluster))
       if (m%metis_block < 0) call fail('mesh', 'metis_block', &
         'must be 0 (automatic) or a block edge b >= 1 in elements', ints([m%metis_block]))
-      if (status == 0) then     ! (no short-circuit in Fortran: mod only with cluster >= 1)
+      if (status == 0 .and. all(m%cluster >= 1)) then     ! (no short-circuit in Fortran: mod only with cluster >= 1)
         if (any(mod(m%nsub, m%cluster) /= 0)) &
           call fail('mesh', 'cluster', 'must divide nsub in every direction (nsub = '//ints(m%nsub)//')', &
                     ints(m%cluster))
@@ -764,6 +777,81 @@ contains
             ' (got '//trim(got)//')'
     end subroutine fail
   end subroutine check_params
+
+  !> `&mesh cluster = 0, 0, 0` (the default): replace it by `auto_cluster`'s
+  !> choice for `nranks` ranks, and record that and why (cluster_auto,
+  !> cluster_choice). Explicit values are left as they are.
+  subroutine resolve_cluster(p, nranks)
+    type(params_t), intent(inout) :: p
+    integer, intent(in) :: nranks
+    character(len=160) :: reason
+    if (.not. all(p%mesh%cluster == 0)) return
+    p%mesh%cluster = auto_cluster(p, nranks, reason)
+    p%mesh%cluster_auto = .true.
+    p%mesh%cluster_choice = reason
+  end subroutine resolve_cluster
+
+  !> The automatic choice of hybrid TFETI clusters (docs/INPUT.md `cluster`,
+  !> measured in docs/RESULTS.md "Automatic clusters (issue 14, session 9)").
+  !> Clusters pay where the coarse problem dominates: subdomains of at most
+  !> `auto_max_nel` = 2 elements per direction (H/h <= 2), at least
+  !> 512 (H/h)^3 of them (H/h the largest entry of nel: 512 subdomains of one
+  !> element, 4096 of 2^3; measured to lose at 64 of one element and at 64
+  !> and 512 of 2^3, to break even at 1728 of 2^3). Then, per direction, the
+  !> largest divisor c of nsub with nel*c <= `auto_cluster_edge` = 4
+  !> elements along the cluster's edge, reduced (largest entry first) until
+  !> every rank holds at least `auto_clusters_per_rank` = 4 clusters (a
+  !> balance guard, not measured: a cluster lives on one rank). [1, 1, 1]
+  !> (plain TFETI) whenever a requirement of hybrid TFETI fails (box
+  !> decomposition, uniform material, no Dirichlet preconditioner, implicit
+  !> F) or the rule does not fire; `reason` says which.
+  function auto_cluster(p, nranks, reason) result(c)
+    type(params_t), intent(in) :: p
+    integer, intent(in) :: nranks
+    character(len=*), intent(out) :: reason
+    integer(ip) :: c(3)
+    integer(ip), parameter :: auto_max_nel = 2, auto_min_subdomains = 512, auto_cluster_edge = 4, &
+                              auto_clusters_per_rank = 4
+    integer(ip) :: d, k, hh
+    c = 1
+    associate (nsub => p%mesh%nsub, nel => p%mesh%nel)
+      if (p%mesh%decomposition /= 'box') then
+        reason = "plain TFETI: hybrid TFETI needs decomposition = 'box'"
+      else if (p%material%variation /= 'none') then
+        reason = "plain TFETI: hybrid TFETI needs &material variation = 'none'"
+      else if (p%solver%preconditioner == 'dirichlet') then
+        reason = "plain TFETI: hybrid TFETI does not take &solver preconditioner = 'dirichlet'"
+      else if (p%solver%f_action == 'explicit') then
+        reason = "plain TFETI: hybrid TFETI does not take &solver f_action = 'explicit'"
+      else if (any(nel > auto_max_nel)) then
+        reason = 'plain TFETI: subdomains of more than 2 elements in a direction (clusters pay for H/h <= 2)'
+      else if (product(int(nsub, i8)) < int(auto_min_subdomains, i8)*maxval(nel)**3) then
+        hh = maxval(nel)
+        write (reason, '(a,i0,a,i0,a)') 'plain TFETI: fewer than ', auto_min_subdomains*hh**3, &
+          ' subdomains (clusters pay from 512 (H/h)^3 on, H/h = ', hh, ')'
+      else
+        do d = 1, 3
+          do k = max(auto_cluster_edge/nel(d), 1_ip), 1_ip, -1_ip
+            if (mod(nsub(d), k) == 0) exit
+          end do
+          c(d) = k
+        end do
+        do while (any(c > 1) .and. product(int(nsub/c, i8)) < int(auto_clusters_per_rank, i8)*nranks)
+          d = maxloc(c, 1)
+          do k = c(d) - 1, 1, -1
+            if (mod(nsub(d), k) == 0) exit
+          end do
+          c(d) = k
+        end do
+        if (all(c == 1)) then
+          reason = 'plain TFETI: no cluster size divides nsub with enough clusters per rank'
+        else
+          reason = 'hybrid TFETI: small subdomains (H/h <= 2) by the hundred (>= 512 (H/h)^3), '// &
+                   'clusters of up to 4 elements per edge'
+        end if
+      end if
+    end associate
+  end function auto_cluster
 
   !> The variables of group `name` as the namelist writes them (see
   !> group_namelist): the one source of the echo and of report.json.

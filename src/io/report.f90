@@ -165,6 +165,10 @@ contains
       do k = 1, size(items)
         call add_item(items(k))
       end do
+      if (group_names(g) == 'mesh') then      ! the automatic cluster choice (not namelist variables)
+        call w%add('cluster_auto', p%mesh%cluster_auto)
+        call w%add('cluster_choice', trim(p%mesh%cluster_choice))
+      end if
       call w%end_object()
     end do
     call w%end_object()

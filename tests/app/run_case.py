@@ -183,6 +183,21 @@ def check_same_as(outdir, other, tol):
     check(diff <= tol * scale, "same displacements as %s: max diff / max |u| = %.3e <= %.1e" % (other, diff / scale, tol))
 
 
+def check_cluster(outdir, groups, expect):
+    """&mesh cluster: 'auto_hybrid' = chosen automatically and > 1 (dividing nsub), 'auto_plain' = chosen
+    automatically and 1,1,1; report.json records the clusters used, whether they were automatic and why."""
+    with open(os.path.join(outdir, "report.json")) as f:
+        m = json.load(f)["case"]["mesh"]
+    c, nsub = m["cluster"], m["nsub"]
+    check(m.get("cluster_auto") is True, "report: mesh.cluster_auto = true")
+    check(len(m.get("cluster_choice", "")) > 0, "report: mesh.cluster_choice says why: %r" % m.get("cluster_choice"))
+    if expect == "auto_hybrid":
+        check(int(np.prod(c)) > 1 and all(n % k == 0 for n, k in zip(nsub, c)),
+              "automatic clusters %s > 1 and dividing nsub %s" % (c, nsub))
+    else:
+        check(c == [1, 1, 1], "automatic choice plain TFETI (cluster %s)" % c)
+
+
 def check_alpha_agree(outdir, tol):
     """&reconstruction method = 'both': the new (Eq. 24) and the standard (Eq. 10) alpha agree."""
     with open(os.path.join(outdir, "report.json")) as f:
@@ -227,6 +242,8 @@ def main():
             check_report(outdir, args.ranks)
         elif kind == "xdmf":
             check_xdmf(outdir)
+        elif kind == "cluster":
+            check_cluster(outdir, groups, rest[0])
         elif kind == "alpha_agree":
             check_alpha_agree(outdir, float(rest[0]))
         elif kind == "same_as":
