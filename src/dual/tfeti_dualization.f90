@@ -70,7 +70,8 @@ contains
                           rho_growth=sp%rho_growth, rho_contraction=sp%rho_contraction, &
                           rho_window=sp%rho_window, rho_stall=sp%rho_stall, polish_window=sp%polish_window, &
                           polish_rounds=sp%polish_rounds, polish_release=sp%polish_release, &
-                          polish_settle=sp%polish_settle, polish_loose=sp%polish_loose, monitor=sp%monitor)
+                          polish_settle=sp%polish_settle, polish_loose=sp%polish_loose, &
+                          polish_predict=sp%polish_predict, monitor=sp%monitor)
   end function smalbe_settings
 
   !> Build the FETI operators and the dual QP of the case `p` on `comm`.

@@ -98,6 +98,7 @@ module params
     logical :: polish_release = .true.        !< release wrong-sign active rows within the polish
     real(dp) :: polish_settle = 0.15_dp       !< settled: the active set changed on <= this fraction of contact rows
     real(dp) :: polish_loose = 0.3_dp         !< > 0: face solves check the set at every drop of their residual by this factor
+    integer(ip) :: polish_predict = 100       !< > 0: predictive set update from this many projected rows (issue 14, session 9)
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
@@ -507,7 +508,7 @@ contains
     logical :: reading
     integer(ip) :: nsub(3), nel(3), cluster(3), metis_block, distortion_seed, seed, max_outer, max_hessian, power_iterations, &
                    coarse_ranks, &
-                   rho_window, polish_window, polish_rounds
+                   rho_window, polish_window, polish_rounds, polish_predict
     real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, rho_growth, &
                 rho_contraction, rho_stall, coarse_blr, polish_settle, polish_loose, &
@@ -524,7 +525,7 @@ contains
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
       m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, rho_window, rho_stall, polish_window, &
-      polish_rounds, polish_release, polish_settle, polish_loose, &
+      polish_rounds, polish_release, polish_settle, polish_loose, polish_predict, &
       power_iterations, coarse, coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
       f_action, f_storage, share_subdomains, &
       regularization, scaling, stopping, preconditioner, preconditioner_switch, monitor
@@ -570,7 +571,7 @@ contains
         rho_growth = s%rho_growth; rho_contraction = s%rho_contraction; rho_window = s%rho_window
         rho_stall = s%rho_stall; polish_window = s%polish_window
         polish_rounds = s%polish_rounds; polish_release = s%polish_release
-        polish_settle = s%polish_settle; polish_loose = s%polish_loose
+        polish_settle = s%polish_settle; polish_loose = s%polish_loose; polish_predict = s%polish_predict
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
         f_action = s%f_action; f_storage = s%f_storage; share_subdomains = s%share_subdomains
@@ -609,8 +610,8 @@ contains
       p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
                                  rho_scale, m_scale, beta, eta_scale, lower(m_no_step), rho_growth, &
                                  rho_contraction, rho_window, rho_stall, polish_window, &
-                                 polish_rounds, polish_release, polish_settle, polish_loose, power_iterations, &
-                                 lower(coarse), &
+                                 polish_rounds, polish_release, polish_settle, polish_loose, polish_predict, &
+                                 power_iterations, lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
                                  lower(share_subdomains), &
                                  lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, &
@@ -719,6 +720,8 @@ contains
         call fail('solver', 'polish_settle', 'must be in [0, 1) (0: no change)', reals([s%polish_settle]))
       if (.not. (s%polish_loose >= 0 .and. s%polish_loose < 1)) &
         call fail('solver', 'polish_loose', 'must be in [0, 1) (0: off)', reals([s%polish_loose]))
+      if (s%polish_predict < 0) &
+        call fail('solver', 'polish_predict', 'must be >= 0 (0: off)', ints([s%polish_predict]))
       if (s%power_iterations < 1) &
         call fail('solver', 'power_iterations', 'must be >= 1', ints([s%power_iterations]))
       if (.not. one_of(s%coarse, [character(len=8) :: 'mumps', 'cholesky'])) &

@@ -94,8 +94,8 @@ contains
     call js%add_each([character(len=24) :: 'polish_window', 'polish_count', 'polish_hessian', 'polish_cg_steps', &
                       'polish_accepted'], int([solver%polish_window, solver%n_polish, solver%n_polish_hessian, &
                                                solver%n_polish_steps, solver%n_polish_exact], i8))
-    call js%add_each([character(len=24) :: 'polish_face_solves', 'polish_released'], &
-                     int([solver%n_polish_rounds, solver%n_polish_released], i8))
+    call js%add_each([character(len=24) :: 'polish_face_solves', 'polish_released', 'polish_predicted'], &
+                     int([solver%n_polish_rounds, solver%n_polish_released, solver%n_polish_predicted], i8))
     associate (rz => solver%inner%ritz)
       if (rz%n_runs > 0) then
         call js%add_each([character(len=24) :: 'face_condition_estimate', 'face_ritz_min', 'face_ritz_max'], &

@@ -82,7 +82,9 @@
 !>    gradient has the wrong sign are also freed, primal-dual active set
 !>    rounds, see polish_step; with polish_loose > 0 a face solve that may be
 !>    followed by another round stops at its loose check when the set would
-!>    change, face_solve). polish_settle > 0: an outer iteration counts as
+!>    change, face_solve; with polish_predict > 0 a round that projected at
+!>    least that many rows and released none also makes as many of the free
+!>    rows nearest their bound active, predicted_rows). polish_settle > 0: an outer iteration counts as
 !>    settled when the set changed on at most that fraction of the bounded
 !>    rows; a polish given up at its first face then does not count toward
 !>    smalbe_polish_max, and the next waits until the products have doubled.
@@ -120,7 +122,7 @@ module smalbe
                         qp_status_incompatible, qp_status_not_run
   use mprgp, only: mprgp_t, mprgp_stop_t, ensure_size
   use face_solve, only: face_polish_t, free_rows, face_changes
-  use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_Comm_rank
+  use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_Comm_rank, MPI_DOUBLE_PRECISION
   implicit none
   private
 
@@ -194,6 +196,11 @@ module smalbe
     !> the inner solve right after a polish takes a step (with a bound beta^j M for that solve only)
     !> unless the outer test accepts the polished pair (docs/THEORY.md, session 8)
     logical :: polish_force_step = .true.
+    !> > 0: predictive set update in the polish rounds (issue 14, session 9): after a round that
+    !> projects k >= polish_predict free rows onto their bound and releases none, also the k other
+    !> free rows with the smallest slack x_i - l_i (at most half of them) become active (the next
+    !> round's release corrects them); 0: off
+    integer(ip) :: polish_predict = 0
     logical :: monitor = .false.               !< one line per outer iteration and a summary
   end type smalbe_settings_t
 
@@ -210,7 +217,7 @@ module smalbe
   !> a face solve whose loose check found no change (a trusted face) may take this many CG steps
   integer(ip), parameter, public :: smalbe_polish_trusted_steps = 500
 
-  public :: polish_cycling, face_signature
+  public :: polish_cycling, face_signature, predicted_rows
 
   !> The SMALBE-M solver with its inner MPRGP. All counters are totals of the
   !> last solve (components, for report.json).
@@ -235,6 +242,8 @@ module smalbe
     logical :: polish_release = .false.        !< release wrong-sign active rows within the polish
     real(dp) :: polish_settle = 0              !< settled: active set changes on <= this fraction of bounded rows
     real(dp) :: polish_loose = 0               !< loose check of the face solves (0: off)
+    integer(ip) :: polish_predict = 0          !< predictive set update from this many projected rows (0: off)
+    integer(ip) :: n_polish_predicted = 0      !< rows made active by the prediction in all
     logical :: force_polish_step = .true.      !< the inner solve after a polish takes a step (settings)
     integer(ip) :: n_forced = 0                !< inner solves whose bound was cut to force a step
     integer(ip) :: n_polish_released = 0       !< active rows released by the polish in all (polish_release)
@@ -385,7 +394,7 @@ contains
   subroutine smalbe_init(self, a_norm, tol, max_outer, max_hessian, gamma, alpha_scale, expansion, &
                          m_scale, beta, eta_scale, monitor, m_no_step, rho_growth, rho_contraction, rho_window, &
                          rho_stall, polish_window, polish_rounds, polish_release, polish_settle, polish_loose, &
-                         polish_force_step)
+                         polish_force_step, polish_predict)
     class(smalbe_t), intent(inout) :: self
     real(dp), intent(in) :: a_norm, tol
     integer(ip), intent(in) :: max_outer, max_hessian
@@ -393,7 +402,7 @@ contains
                                       rho_stall, polish_settle, polish_loose
     character(len=*), intent(in), optional :: expansion, m_no_step
     logical, intent(in), optional :: monitor, polish_release, polish_force_step
-    integer(ip), intent(in), optional :: rho_window, polish_window, polish_rounds
+    integer(ip), intent(in), optional :: rho_window, polish_window, polish_rounds, polish_predict
 
     call self%free()
     call self%inner%init(a_norm, tol, max_hessian, gamma, alpha_scale, expansion, monitor=.false.)
@@ -431,6 +440,8 @@ contains
     if (present(polish_loose)) self%polish_loose = polish_loose
     self%force_polish_step = .true.
     if (present(polish_force_step)) self%force_polish_step = polish_force_step
+    self%polish_predict = 0
+    if (present(polish_predict)) self%polish_predict = polish_predict
 
     if (.not. (tol > 0 .and. tol < 1)) call fatal_error('smalbe: tol must be in (0, 1)')
     if (max_outer < 1) call fatal_error('smalbe: max_outer must be >= 1')
@@ -454,6 +465,7 @@ contains
       call fatal_error('smalbe: polish_settle must be in [0, 1)')
     if (.not. (self%polish_loose >= 0 .and. self%polish_loose < 1)) &
       call fatal_error('smalbe: polish_loose must be in [0, 1)')
+    if (self%polish_predict < 0) call fatal_error('smalbe: polish_predict must be >= 0')
   end subroutine smalbe_init
 
   !> The settings `s` at once, with ||A|| = a_norm (penalty included).
@@ -464,7 +476,7 @@ contains
     call self%init(a_norm, s%tol, s%max_outer, s%max_hessian, s%gamma, s%alpha_scale, s%expansion, &
                    s%m_scale, s%beta, s%eta_scale, s%monitor, s%m_no_step, s%rho_growth, s%rho_contraction, &
                    s%rho_window, s%rho_stall, s%polish_window, s%polish_rounds, s%polish_release, &
-                   s%polish_settle, s%polish_loose, s%polish_force_step)
+                   s%polish_settle, s%polish_loose, s%polish_force_step, s%polish_predict)
   end subroutine smalbe_init_with
 
   subroutine smalbe_free(self)
@@ -846,6 +858,9 @@ contains
   !> one ends the polish (SMALBE goes on from the feasible pair). Equal change
   !> counts on new sets go on (session 8: cube_h4_n64 with polish_settle =
   !> 0.15 changed 24, 4, 4, ... rows on its way to the solution's face).
+  !> With polish_predict > 0 a round that projected k >= polish_predict rows
+  !> and released none also puts the k free rows of smallest slack onto their
+  !> bound (predicted_rows; the next round's release corrects wrong ones).
   !> Collective.
   subroutine polish_step(self, problem, x, outer, restored)
     class(smalbe_t), intent(inout) :: self
@@ -853,7 +868,7 @@ contains
     real(dp), intent(inout) :: x(:)
     integer(ip), intent(in) :: outer
     logical, intent(out) :: restored      !< the first face solve was given up: x, mu as before
-    integer(ip) :: n, i, budget, budget_trusted, counts(2), rounds, n_changes, prev_changes
+    integer(ip) :: n, i, budget, budget_trusted, counts(2), rounds, n_changes, prev_changes, n_predicted
     real(dp) :: wi, change_tol, loose
     logical :: again, cycling, revisited
     logical, allocatable :: release(:)
@@ -956,6 +971,17 @@ contains
           end do
           self%n_polish_released = self%n_polish_released + counts(2)
         end if
+        ! predictive update (polish_predict): after a round that projected at least polish_predict
+        ! rows and released none, as many more free rows, those nearest their bound, become active
+        ! with them (the next round releases those whose gradient says otherwise)
+        if (self%polish_predict > 0 .and. counts(1) >= self%polish_predict .and. counts(2) == 0) then
+          n_predicted = predicted_rows(problem, self%free_now, x, counts(1), release)
+          self%n_polish_predicted = self%n_polish_predicted + n_predicted
+          if (self%monitor .and. n_predicted > 0) then
+            write (buf, '(a,i0,a)') 'polish: ', n_predicted, ' more free rows nearest their bound made active'
+            call log_message(trim(buf))
+          end if
+        end if
         if (counts(1) > 0) then
           call problem%project(x)
           call problem%track_reset()
@@ -992,6 +1018,58 @@ contains
       self%n_polish_hessian = self%n_polish_hessian + 1
     end subroutine fresh_gradient
   end subroutine polish_step
+
+  !> The predictive set update of the polish (polish_predict): of the free
+  !> bounded rows with x_i >= l_i (not released in this round: `skip`), the k
+  !> with the smallest slack x_i - l_i (ties included) are put onto their
+  !> bound (x_i = l_i), at most half of them (a face keeps free rows). The
+  !> threshold is found by bisection on the slack with one MPI_Allreduce of a
+  !> count per step. Returns the number of rows moved (global). Collective.
+  function predicted_rows(problem, free, x, k, skip) result(n_moved)
+    class(qp_problem_t), intent(in) :: problem
+    logical, intent(in) :: free(:), skip(:)
+    real(dp), intent(inout) :: x(:)
+    integer(ip), intent(in) :: k
+    integer(ip) :: n_moved
+    logical, allocatable :: cand(:)
+    real(dp) :: lo, hi, mid, local_max
+    integer(ip) :: i, n_cand, local, cnt, want, it
+    integer :: ierr
+    n_moved = 0
+    allocate (cand(problem%n))
+    local_max = 0
+    do i = 1, problem%n
+      cand(i) = free(i) .and. .not. skip(i) .and. problem%lower(i) > no_lower_bound
+      if (cand(i)) cand(i) = x(i) >= problem%lower(i)
+      if (cand(i)) local_max = max(local_max, x(i) - problem%lower(i))
+    end do
+    local = count(cand, kind=ip)
+    call MPI_Allreduce(local, n_cand, 1, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
+    call MPI_Allreduce(local_max, hi, 1, MPI_DOUBLE_PRECISION, MPI_MAX, problem%comm, ierr)
+    want = min(k, n_cand/2)
+    if (want <= 0) return
+    ! the least threshold t (to a relative 2^-50 of the largest slack) with #{slack <= t} >= want
+    lo = 0
+    do it = 1, 60
+      mid = 0.5_dp*(lo + hi)
+      local = count(cand .and. x(1:problem%n) - problem%lower(1:problem%n) <= mid, kind=ip)
+      call MPI_Allreduce(local, cnt, 1, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
+      if (cnt >= want) then
+        hi = mid
+      else
+        lo = mid
+      end if
+      if (hi - lo <= epsilon(1.0_dp)*hi) exit
+    end do
+    local = 0
+    do i = 1, problem%n
+      if (cand(i) .and. x(i) - problem%lower(i) <= hi) then
+        x(i) = problem%lower(i)
+        local = local + 1
+      end if
+    end do
+    call MPI_Allreduce(local, n_moved, 1, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
+  end function predicted_rows
 
   !> The polish's safeguard against cycling: with n_changes > 0 set changes
   !> after round `rounds` (prev_changes those of the round before, huge at the
@@ -1108,6 +1186,7 @@ contains
     self%n_polish_exact = 0
     self%n_polish_aborted = 0
     self%n_polish_released = 0
+    self%n_polish_predicted = 0
     self%n_forced = 0
     self%cnorm_history = [real(dp) ::]
     self%hessian_history = [integer(ip) ::]
@@ -1172,6 +1251,8 @@ contains
         ', given up ', self%n_polish_aborted, ')'
       if (self%polish_release) write (buf, '(a,a,i0,a)') trim(buf), ', released ', self%n_polish_released, &
         ' active rows'
+      if (self%n_polish_predicted > 0) write (buf, '(a,a,i0,a)') trim(buf), ', predicted ', &
+        self%n_polish_predicted, ' active rows'
       if (self%n_forced > 0) write (buf, '(a,a,i0,a)') trim(buf), '; ', self%n_forced, &
         ' inner solves after a polish made to take a step'
       call log_message(buf)
