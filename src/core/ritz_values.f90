@@ -132,13 +132,12 @@ contains
   !> measured 16 -> 7 us at m = 25).
   real(dp) function current_ratio(self) result(ratio)
     class(cg_ritz_t), intent(in) :: self
-    real(dp), allocatable :: d(:), e(:)
+    real(dp) :: d(self%m), e(max(self%m - 1, 0))   ! automatic: no heap allocation per CG step
     real(dp) :: lo, hi
     integer(ip) :: k, m
     ratio = 0
     m = self%m
     if (.not. self%open .or. m < 2) return
-    allocate (d(m), e(m - 1))
     d(1) = 1/self%alpha(1)
     do k = 2, m
       d(k) = 1/self%alpha(k) + self%beta(k - 1)/self%alpha(k - 1)

@@ -77,7 +77,6 @@ module dual_problem
     logical :: use_prec = .false.
     real(dp) :: prec_q_weight = 1              !< sigma: M_A^{-1} A = sigma on Im Q
     !> 'auto': lumped until the face condition estimate exceeds switch_kappa
-    logical, private :: auto_pending = .false.
     logical :: auto_mode = .false.             !< set_preconditioner was asked for 'auto'
     real(dp) :: switch_kappa = 0               !< the threshold kappa_s ('auto')
     real(dp), allocatable, private :: prec_weights(:)
@@ -220,7 +219,6 @@ contains
     call self%prec%free()
     self%use_prec = kind /= 'none'
     self%auto_mode = kind == 'auto'
-    self%auto_pending = self%auto_mode
     self%switch_at = -1
     self%switch_estimate = 0
     if (.not. self%use_prec) return
@@ -240,7 +238,7 @@ contains
   !> 'auto' before its switch: the face condition estimate is watched.
   logical function watches_condition(self)
     class(dual_problem_t), intent(in) :: self
-    watches_condition = self%auto_pending
+    watches_condition = self%auto_mode .and. self%switch_at < 0
   end function watches_condition
 
   !> 'auto': the first time the face condition estimate kappa exceeds
@@ -255,22 +253,19 @@ contains
     class(dual_problem_t), intent(inout) :: self
     real(dp), intent(in) :: kappa
     logical, intent(out) :: switched
-    real(dp) :: k_all
     character(len=200) :: line
     switched = .false.
-    if (.not. self%auto_pending) return
-    k_all = kappa
-    if (.not. k_all > self%switch_kappa) return
+    if (.not. self%watches_condition()) return
+    if (.not. kappa > self%switch_kappa) return
     call timer_start('preconditioner setup')
     call self%prec%free()
     call self%op%init_preconditioner(self%prec, 'dirichlet', self%prec_weights)
     call timer_stop('preconditioner setup')
-    self%auto_pending = .false.
     self%switch_at = self%n_products
-    self%switch_estimate = k_all
+    self%switch_estimate = kappa
     switched = .true.
     write (line, '(a,i0,a,es10.3,a,es10.3,a)') "preconditioner 'auto': lumped -> dirichlet after ", &
-      self%n_products, ' Hessian products (face condition estimate ', k_all, ' > ', self%switch_kappa, ')'
+      self%n_products, ' Hessian products (face condition estimate ', kappa, ' > ', self%switch_kappa, ')'
     call log_message(trim(line))
   end subroutine condition_estimate
 
@@ -551,7 +546,6 @@ contains
     call self%prec%free()
     self%use_prec = .false.
     self%auto_mode = .false.
-    self%auto_pending = .false.
     if (allocated(self%wp)) deallocate (self%wp, self%wq, self%wm)
     call self%face_free()
     self%op => null()
