@@ -71,7 +71,7 @@ contains
                           rho_window=sp%rho_window, rho_stall=sp%rho_stall, polish_window=sp%polish_window, &
                           polish_rounds=sp%polish_rounds, polish_release=sp%polish_release, &
                           polish_settle=sp%polish_settle, polish_loose=sp%polish_loose, &
-                          polish_predict=sp%polish_predict, monitor=sp%monitor)
+                          polish_predict=sp%polish_predict, polish_first=sp%polish_first, monitor=sp%monitor)
   end function smalbe_settings
 
   !> Build the FETI operators and the dual QP of the case `p` on `comm`.

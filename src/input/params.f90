@@ -99,6 +99,7 @@ module params
     real(dp) :: polish_settle = 0.15_dp       !< settled: the active set changed on <= this fraction of contact rows
     real(dp) :: polish_loose = 0.3_dp         !< > 0: face solves check the set at every drop of their residual by this factor
     integer(ip) :: polish_predict = 100       !< > 0: predictive set update from this many projected rows (issue 14, session 9)
+    logical :: polish_first = .true.          !< polish before the first outer iteration from every contact row at its bound
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
@@ -517,7 +518,8 @@ contains
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
                                m_no_step, f_action, f_storage, share_subdomains, preconditioner
     character(len=path_len) :: directory
-    logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report, coarse_ooc, polish_release
+    logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report, coarse_ooc, polish_release, &
+               polish_first
     namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping, cluster, metis_block
     namelist /material/ young, poisson, variation, contrast, seed
     namelist /load/ top_pressure
@@ -525,7 +527,7 @@ contains
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
       m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, rho_window, rho_stall, polish_window, &
-      polish_rounds, polish_release, polish_settle, polish_loose, polish_predict, &
+      polish_rounds, polish_release, polish_settle, polish_loose, polish_predict, polish_first, &
       power_iterations, coarse, coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
       f_action, f_storage, share_subdomains, &
       regularization, scaling, stopping, preconditioner, preconditioner_switch, monitor
@@ -572,6 +574,7 @@ contains
         rho_stall = s%rho_stall; polish_window = s%polish_window
         polish_rounds = s%polish_rounds; polish_release = s%polish_release
         polish_settle = s%polish_settle; polish_loose = s%polish_loose; polish_predict = s%polish_predict
+        polish_first = s%polish_first
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
         f_action = s%f_action; f_storage = s%f_storage; share_subdomains = s%share_subdomains
@@ -611,7 +614,7 @@ contains
                                  rho_scale, m_scale, beta, eta_scale, lower(m_no_step), rho_growth, &
                                  rho_contraction, rho_window, rho_stall, polish_window, &
                                  polish_rounds, polish_release, polish_settle, polish_loose, polish_predict, &
-                                 power_iterations, lower(coarse), &
+                                 polish_first, power_iterations, lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
                                  lower(share_subdomains), &
                                  lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, &

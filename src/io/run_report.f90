@@ -96,6 +96,8 @@ contains
                                                solver%n_polish_steps, solver%n_polish_exact], i8))
     call js%add_each([character(len=24) :: 'polish_face_solves', 'polish_released', 'polish_predicted'], &
                      int([solver%n_polish_rounds, solver%n_polish_released, solver%n_polish_predicted], i8))
+    ! polish_first: whether the solve started with a polish that was not given up
+    call js%add('polish_first_used', solver%polished_first)
     associate (rz => solver%inner%ritz)
       if (rz%n_runs > 0) then
         call js%add_each([character(len=24) :: 'face_condition_estimate', 'face_ritz_min', 'face_ritz_max'], &

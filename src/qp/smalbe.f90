@@ -201,6 +201,10 @@ module smalbe
     !> free rows with the smallest slack x_i - l_i (at most half of them) become active (the next
     !> round's release corrects them); 0: off
     integer(ip) :: polish_predict = 0
+    !> polish before the first outer iteration (issue 14, session 10): from x with every bounded
+    !> row at its bound, the polish rounds (release, projection) on that face; only where the
+    !> problem knows the equality rows alone to fix it (face_always_regular)
+    logical :: polish_first = .false.
     logical :: monitor = .false.               !< one line per outer iteration and a summary
   end type smalbe_settings_t
 
@@ -243,6 +247,8 @@ module smalbe
     real(dp) :: polish_settle = 0              !< settled: active set changes on <= this fraction of bounded rows
     real(dp) :: polish_loose = 0               !< loose check of the face solves (0: off)
     integer(ip) :: polish_predict = 0          !< predictive set update from this many projected rows (0: off)
+    logical :: polish_first = .false.          !< polish before the first outer iteration (start face)
+    logical :: polished_first = .false.        !< the last solve started with a polish that was not given up
     integer(ip) :: n_polish_predicted = 0      !< rows made active by the prediction in all
     logical :: force_polish_step = .true.      !< the inner solve after a polish takes a step (settings)
     integer(ip) :: n_forced = 0                !< inner solves whose bound was cut to force a step
@@ -394,14 +400,14 @@ contains
   subroutine smalbe_init(self, a_norm, tol, max_outer, max_hessian, gamma, alpha_scale, expansion, &
                          m_scale, beta, eta_scale, monitor, m_no_step, rho_growth, rho_contraction, rho_window, &
                          rho_stall, polish_window, polish_rounds, polish_release, polish_settle, polish_loose, &
-                         polish_force_step, polish_predict)
+                         polish_force_step, polish_predict, polish_first)
     class(smalbe_t), intent(inout) :: self
     real(dp), intent(in) :: a_norm, tol
     integer(ip), intent(in) :: max_outer, max_hessian
     real(dp), intent(in), optional :: gamma, alpha_scale, m_scale, beta, eta_scale, rho_growth, rho_contraction, &
                                       rho_stall, polish_settle, polish_loose
     character(len=*), intent(in), optional :: expansion, m_no_step
-    logical, intent(in), optional :: monitor, polish_release, polish_force_step
+    logical, intent(in), optional :: monitor, polish_release, polish_force_step, polish_first
     integer(ip), intent(in), optional :: rho_window, polish_window, polish_rounds, polish_predict
 
     call self%free()
@@ -442,6 +448,8 @@ contains
     if (present(polish_force_step)) self%force_polish_step = polish_force_step
     self%polish_predict = 0
     if (present(polish_predict)) self%polish_predict = polish_predict
+    self%polish_first = .false.
+    if (present(polish_first)) self%polish_first = polish_first
 
     if (.not. (tol > 0 .and. tol < 1)) call fatal_error('smalbe: tol must be in (0, 1)')
     if (max_outer < 1) call fatal_error('smalbe: max_outer must be >= 1')
@@ -476,7 +484,7 @@ contains
     call self%init(a_norm, s%tol, s%max_outer, s%max_hessian, s%gamma, s%alpha_scale, s%expansion, &
                    s%m_scale, s%beta, s%eta_scale, s%monitor, s%m_no_step, s%rho_growth, s%rho_contraction, &
                    s%rho_window, s%rho_stall, s%polish_window, s%polish_rounds, s%polish_release, &
-                   s%polish_settle, s%polish_loose, s%polish_force_step, s%polish_predict)
+                   s%polish_settle, s%polish_loose, s%polish_force_step, s%polish_predict, s%polish_first)
   end subroutine smalbe_init_with
 
   subroutine smalbe_free(self)
@@ -623,6 +631,28 @@ contains
     if (self%monitor) call monitor_header(self)
 
     self%status = qp_status_not_run
+    ! 0. polish first (polish_first): the polish rounds from the face on which every bounded row
+    ! is at its bound (a primal-dual active set start: the first round releases the rows whose
+    ! gradient has the wrong sign); only where the equality rows alone fix the problem
+    ! (face_always_regular: C_E C_E^T regular), as for the polish of an all-active set below
+    self%polished_first = .false.
+    if (polishing .and. self%polish_first .and. problem%face_always_regular() .and. self%max_hessian > 2) then
+      if (self%monitor) call log_message('polish first: the face with every contact row at its bound')
+      self%free_now(1:n) = .not. problem%lower(1:n) > no_lower_bound
+      x(1:n) = merge(x(1:n), problem%lower(1:n), self%free_now(1:n))
+      self%gradient(1:n) = 0
+      call polish_step(self, problem, x, 0_ip, restored)
+      if (restored) then
+        ! given up in its first round: SMALBE from that x (MPRGP computes the gradient)
+        n_given_up = n_given_up + 1
+        hessian_wait = 2*self%n_hessian
+      else
+        gradient_given = .true.
+        after_polish = .true.
+        self%polished_first = .true.
+      end if
+      call free_rows(problem, x, self%free_prev)
+    end if
     do outer = 1, self%max_outer
       ! 1. inner problem, warm started from x_{k-1} with the gradient for mu_k
       self%x_prev(1:n) = x(1:n)
