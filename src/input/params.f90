@@ -97,7 +97,7 @@ module params
     integer(ip) :: polish_rounds = 8          !< face solves per polish at most
     logical :: polish_release = .true.        !< release wrong-sign active rows within the polish
     real(dp) :: polish_settle = 0.15_dp       !< settled: the active set changed on <= this fraction of contact rows
-    real(dp) :: polish_loose = 0.3_dp         !< > 0: face solves check the set at every drop of their residual by this factor
+    real(dp) :: polish_loose = 0.5_dp         !< > 0: face solves check the set at every drop of their residual by this factor
     integer(ip) :: polish_predict = 100       !< > 0: predictive set update from this many projected rows (issue 14, session 9)
     logical :: polish_first = .true.          !< polish before the first outer iteration from every contact row at its bound
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
