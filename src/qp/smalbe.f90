@@ -641,17 +641,10 @@ contains
       self%free_now(1:n) = .not. problem%lower(1:n) > no_lower_bound
       x(1:n) = merge(x(1:n), problem%lower(1:n), self%free_now(1:n))
       self%gradient(1:n) = 0
-      call polish_step(self, problem, x, 0_ip, restored)
-      if (restored) then
-        ! given up in its first round: SMALBE from that x (MPRGP computes the gradient)
-        n_given_up = n_given_up + 1
-        hessian_wait = 2*self%n_hessian
-      else
-        gradient_given = .true.
-        after_polish = .true.
-        self%polished_first = .true.
-      end if
-      call free_rows(problem, x, self%free_prev)
+      call polish_and_account(0_ip)
+      ! given up in its first round: SMALBE from that x (MPRGP computes the gradient)
+      gradient_given = .not. restored
+      self%polished_first = .not. restored
     end if
     do outer = 1, self%max_outer
       ! 1. inner problem, warm started from x_{k-1} with the gradient for mu_k
@@ -851,28 +844,37 @@ contains
       if (polishing .and. n_stable >= self%polish_window .and. .not. polished_set .and. &
           self%n_polish - n_given_up < smalbe_polish_max .and. self%n_hessian >= hessian_wait .and. &
           self%max_hessian - self%n_hessian > 2) then
-        call polish_step(self, problem, x, outer, restored)
-        self%free_prev = self%free_now
-        n_stable = 0
-        polished_set = .true.
-        if (.not. restored) then
-          after_polish = .true.
-          l_shift = 0
-        end if
-        if (self%polish%aborted .and. self%polish_settle > 0) then
-          ! with the early trigger a face given up (too slow for the budget of an early polish,
-          ! ill-conditioned faces) does not use up a polish, and the same set may be polished
-          ! again; the next polish waits until the products have doubled (its budget grows with
-          ! them), which bounds the waste by the products spent
-          n_given_up = n_given_up + 1
-          hessian_wait = 2*self%n_hessian
-          polished_set = .false.
-        end if
+        call polish_and_account(outer)
       end if
     end do
     self%n_eq_residual = self%rule%n_eq_residual
     self%n_active = problem%count_at_bound(x)
     if (self%monitor) call monitor_summary(self)
+
+  contains
+
+    !> The polish after outer iteration k (k = 0: the polish first) and what
+    !> the outer loop keeps of it.
+    subroutine polish_and_account(k)
+      integer(ip), intent(in) :: k
+      call polish_step(self, problem, x, k, restored)
+      self%free_prev = self%free_now
+      n_stable = 0
+      polished_set = .true.
+      if (.not. restored) then
+        after_polish = .true.
+        l_shift = 0
+      end if
+      if (self%polish%aborted .and. self%polish_settle > 0) then
+        ! with the early trigger a face given up (too slow for the budget of an early polish,
+        ! ill-conditioned faces) does not use up a polish, and the same set may be polished
+        ! again; the next polish waits until the products have doubled (its budget grows with
+        ! them), which bounds the waste by the products spent
+        n_given_up = n_given_up + 1
+        hessian_wait = 2*self%n_hessian
+        polished_set = .false.
+      end if
+    end subroutine polish_and_account
   end subroutine smalbe_solve
 
   !> Step 6 of the module: the face solve on the free rows free_now, then
