@@ -88,6 +88,8 @@ module dual_problem
     !> rows): the FETI operators' reusable masked instance (one MUMPS analysis
     !> per run, a numerical factorization per face; feti_t%masked_coarse)
     type(coarse_problem_t), pointer, private :: face_cp => null()
+    !> the face solve uses face_operator_lazy (tests compare with .false.: face_operator)
+    logical :: lazy_face = .true.
     logical, private :: face_ready = .false.
   contains
     procedure :: init
@@ -116,6 +118,9 @@ module dual_problem
     procedure :: face_coefficient
     procedure :: face_free
     procedure :: face_operator
+    procedure :: face_lazy
+    procedure :: face_operator_lazy
+    procedure :: eq_range_coefficient
     procedure :: face_precondition
     procedure :: hessian_norm
     procedure :: alpha_bar
@@ -346,6 +351,33 @@ contains
     q(1:self%n) = q(1:self%n)/self%scale
     self%n_products = self%n_products + 1
   end subroutine face_operator
+
+  !> The face solve may use face_operator_lazy wherever it polishes.
+  logical function face_lazy(self)
+    class(dual_problem_t), intent(in) :: self
+    face_lazy = self%lazy_face .and. self%has_face_solver()
+  end function face_lazy
+
+  !> q = F p / s for p in Ker G: A p = P F p / s plus G^T (G G^T)^{-1} G F p / s,
+  !> a term in the range of G^T (no coarse solve; face_solve takes the sum of
+  !> these terms out once at the end by eq_range_coefficient).
+  subroutine face_operator_lazy(self, p, q)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: p(:)
+    real(dp), intent(out) :: q(:)
+    call self%op%apply_f(p, q)
+    q(1:self%n) = q(1:self%n)/self%scale
+    self%n_products = self%n_products + 1
+  end subroutine face_operator_lazy
+
+  !> c = (G G^T)^{-1} G y (local coarse blocks, the form eq_apply_t takes):
+  !> G^T c is the part of y that P removes. One coarse solve. Collective.
+  subroutine eq_range_coefficient(self, y, c)
+    class(dual_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: y(:)
+    real(dp), intent(out) :: c(:)
+    call self%op%project(y, self%pfpx, zx=c)
+  end subroutine eq_range_coefficient
 
   !> z = s M^{-1} r (FETI's PCPG preconditioner without the projections of
   !> M_A^{-1}; P_F follows in face_solve), r itself without preconditioner.

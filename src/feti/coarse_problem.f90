@@ -105,6 +105,10 @@ module coarse_problem
     !> formula (K + V V^T)^{-1} = K^{-1} - W C^{-1} W^T
     integer :: upd_k = 0
     real(dp), allocatable :: upd_v(:, :), upd_w(:, :), upd_c(:, :)
+    !> keys of the update's columns (set_update with keys; ascending, the same on every rank):
+    !> the next set_update with keys reuses the columns of W whose key it holds again
+    integer(i8), allocatable :: upd_keys(:)
+    integer(i8) :: update_solves = 0          !< columns of W solved by set_update since init
     ! rank groups (see the module documentation)
     integer :: ngroups = 1, group = 0, group_rank = 0, group_size = 1
     type(MPI_Comm) :: group_comm            !< this rank's group (MUMPS runs on it)
@@ -123,6 +127,7 @@ module coarse_problem
     procedure :: set_update
     procedure :: clear_update
     procedure :: update_rank
+    procedure :: n_update_solves
     procedure :: factorization_seconds
     procedure :: factor_flops
     procedure :: phase_seconds
@@ -539,18 +544,63 @@ contains
   !> x k, local coarse blocks; k the same on every rank): W = A^{-1} V (one
   !> solve with k right-hand sides) and the Cholesky factor of C = I + V^T W
   !> (k x k, symmetric positive definite with eigenvalues >= 1 when A is, so
-  !> Woodbury's formula adds no ill-conditioning of its own). Collective.
-  subroutine set_update(this, v)
+  !> Woodbury's formula adds no ill-conditioning of its own).
+  !> `keys` (optional; ascending, the same on every rank): a key per column of
+  !> V that names it (column j is the same vector whenever keys(j) is the
+  !> same). The columns of W whose key the update in place (made with keys on
+  !> the same factorization) holds too are taken from it, and only the others
+  !> are solved for: SMALBE's polish rounds that only project rows onto their
+  !> bound cost no coarse solve here. Collective.
+  subroutine set_update(this, v, keys)
     class(coarse_problem_t), intent(inout) :: this
     real(dp), intent(in) :: v(:, :)
-    integer :: k, nmine, ierr, info, j
+    integer(i8), intent(in), optional :: keys(:)
+    integer :: k, nmine, ierr, info, j, jo, nf
+    real(dp), allocatable :: old_w(:, :), vf(:, :), wf(:, :)
+    integer(i8), allocatable :: old_keys(:)
+    logical, allocatable :: fresh(:)
+    logical :: have_old
+    have_old = .false.
+    if (present(keys)) have_old = this%upd_k > 0 .and. allocated(this%upd_keys)
+    if (have_old) then
+      call move_alloc(this%upd_w, old_w)
+      call move_alloc(this%upd_keys, old_keys)
+    end if
     call this%clear_update()
     k = size(v, 2)
     if (k == 0) return
+    if (present(keys)) then
+      if (size(keys) /= k) call fatal_error('coarse_problem: set_update: one key per column of V')
+    end if
     nmine = 6*this%layout%nlocal
-    allocate (this%upd_v(nmine, k), this%upd_w(nmine, k), this%upd_c(k, k))
+    allocate (this%upd_v(nmine, k), this%upd_w(nmine, k), this%upd_c(k, k), fresh(k))
     this%upd_v = v(1:nmine, :)
-    call this%solve_many(this%upd_v, this%upd_w)
+    fresh = .true.
+    if (have_old) then
+      ! both key lists ascending: one merge
+      jo = 1
+      do j = 1, k
+        do while (jo <= size(old_keys))
+          if (old_keys(jo) >= keys(j)) exit
+          jo = jo + 1
+        end do
+        if (jo > size(old_keys)) exit
+        if (old_keys(jo) == keys(j)) then
+          this%upd_w(:, j) = old_w(:, jo)
+          fresh(j) = .false.
+        end if
+      end do
+    end if
+    nf = count(fresh)
+    if (nf == k) then
+      call this%solve_many(this%upd_v, this%upd_w)
+    else if (nf > 0) then
+      vf = this%upd_v(:, pack([(j, j=1, k)], fresh))
+      allocate (wf(nmine, nf))
+      call this%solve_many(vf, wf)
+      this%upd_w(:, pack([(j, j=1, k)], fresh)) = wf
+    end if
+    this%update_solves = this%update_solves + nf
     this%upd_c = 0
     if (nmine > 0) call dgemm('T', 'N', k, k, nmine, 1.0_dp, this%upd_v, nmine, this%upd_w, nmine, 0.0_dp, &
                               this%upd_c, k)
@@ -564,14 +614,24 @@ contains
     if (info /= 0) call fatal_error('coarse_problem: set_update: I + V^T A^{-1} V is not positive definite '// &
                                     '(the factorized coarse matrix is not)')
     this%upd_k = k
+    if (present(keys)) this%upd_keys = keys
   end subroutine set_update
 
   !> Solve with the factorized matrix alone again.
   subroutine clear_update(this)
     class(coarse_problem_t), intent(inout) :: this
     this%upd_k = 0
-    if (allocated(this%upd_v)) deallocate (this%upd_v, this%upd_w, this%upd_c)
+    if (allocated(this%upd_v)) deallocate (this%upd_v)
+    if (allocated(this%upd_w)) deallocate (this%upd_w)
+    if (allocated(this%upd_c)) deallocate (this%upd_c)
+    if (allocated(this%upd_keys)) deallocate (this%upd_keys)
   end subroutine clear_update
+
+  !> Columns of W that set_update solved for since init (reused ones not counted).
+  integer(i8) function n_update_solves(this)
+    class(coarse_problem_t), intent(in) :: this
+    n_update_solves = this%update_solves
+  end function n_update_solves
 
   !> k of the low-rank update (0: none).
   integer function update_rank(this)
@@ -841,6 +901,7 @@ contains
     this%refactorizations = 0
     this%pattern_hash = 0
     call this%clear_update()
+    this%update_solves = 0
     if (allocated(this%rhs)) deallocate (this%rhs)
     if (this%have_comms) then
       ! after MUMPS's JOB = -2: MUMPS uses the group communicator until then

@@ -16,7 +16,7 @@ module projector
   use orthonormal_coarse, only: orthonormal_coarse_t
   use b_operator, only: b_operator_t
   use mpi_f08, only: MPI_Comm, MPI_Comm_size, MPI_Comm_rank, MPI_Allreduce, MPI_Exscan, MPI_SUM, MPI_LAND, &
-                     MPI_LOGICAL, MPI_IN_PLACE
+                     MPI_LOGICAL, MPI_IN_PLACE, MPI_Allgather, MPI_Allgatherv, MPI_INTEGER, MPI_INTEGER8
   implicit none
   private
 
@@ -157,7 +157,8 @@ contains
     real(dp) :: flops, entries
     logical :: cheap
     real(dp), allocatable :: col(:), wloc(:), v(:, :)
-    integer(ip) :: ls, e, offset
+    integer(ip) :: ls, e, offset, c_mine, c_offset, c
+    integer(i8), allocatable :: my_keys(:), keys(:)
 
     con => b%constraints()
     contact = con%kind(1:con%n_own) == row_contact
@@ -189,15 +190,25 @@ contains
       call MPI_Exscan(k_mine, offset, 1, MPI_INT_IP, MPI_SUM, this%comm, ierr)
       call MPI_Comm_rank(this%comm, rank, ierr)
       if (rank == 0) offset = 0                  ! MPI_Exscan leaves rank 0's result undefined
-      allocate (col(con%n_own), wloc(con%n_local), v(6*this%layout%nlocal, k))
+      ! keys: the global ordinal of each contact row (rank, then row), so that the update of
+      ! the next face finds the columns of this one (coarse_problem%set_update)
+      c_mine = count(contact, kind=ip)
+      c_offset = 0
+      call MPI_Exscan(c_mine, c_offset, 1, MPI_INT_IP, MPI_SUM, this%comm, ierr)
+      if (rank == 0) c_offset = 0
+      allocate (col(con%n_own), wloc(con%n_local), v(6*this%layout%nlocal, k), my_keys(k_mine))
       col = 0
       j = offset
+      c = c_offset
       do i = 1, con%n_own
+        if (contact(i)) c = c + 1
         if (mask(i) .and. contact(i)) then
           j = j + 1
           col(i) = real(j, dp)
+          my_keys(j - offset) = int(c, i8)
         end if
       end do
+      keys = gather_keys(my_keys, k)
       call con%exchange%gather(col, wloc)
       v = 0
       do ls = 1, size(con%b, kind=ip)
@@ -208,7 +219,7 @@ contains
           end do
         end associate
       end do
-      call this%masked%set_update(v)
+      call this%masked%set_update(v, keys)
     else
       if (this%masked%is_reusable()) then
         call this%masked%refactorize(dec, con, mask)
@@ -217,6 +228,25 @@ contains
       end if
       this%masked_mode = masked_refactorized
     end if
+  contains
+
+    !> The keys of all ranks in rank order (k of them in all). Collective.
+    function gather_keys(mine, k) result(all)
+      integer(i8), intent(in) :: mine(:)
+      integer(ip), intent(in) :: k
+      integer(i8) :: all(k)
+      integer :: nranks, r, n_mine
+      integer, allocatable :: counts(:), displs(:)
+      call MPI_Comm_size(this%comm, nranks, ierr)
+      allocate (counts(nranks), displs(nranks))
+      n_mine = size(mine)
+      call MPI_Allgather(n_mine, 1, MPI_INTEGER, counts, 1, MPI_INTEGER, this%comm, ierr)
+      displs(1) = 0
+      do r = 2, nranks
+        displs(r) = displs(r - 1) + counts(r - 1)
+      end do
+      call MPI_Allgatherv(mine, n_mine, MPI_INTEGER8, all, counts, displs, MPI_INTEGER8, this%comm, ierr)
+    end function gather_keys
   end function masked_coarse
 
   !> The explicit G~ = L^{-1} G of `&solver coarse = 'cholesky'`. Collective.

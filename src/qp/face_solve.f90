@@ -57,6 +57,8 @@ module face_solve
   integer(ip), parameter, public :: abort_check = 10
   !> ... would need more than abort_factor * max_steps at its mean rate so far (CG speeds up later)
   real(dp), parameter, public :: abort_factor = 2
+  !> with face_lazy: CG steps between two folds of the range terms out of g
+  integer(ip), parameter, public :: lazy_fold = 20
 
   !> Counters and outcome of the last polish.
   type, public :: face_polish_t
@@ -79,6 +81,7 @@ module face_solve
     logical :: trusted = .false.
     integer(ip) :: loose_counts(2) = 0   !< face_changes at the loose check (0 when not checked)
     real(dp), allocatable, private :: r(:), z(:), p(:), q(:), w(:)
+    real(dp), allocatable, private :: g0(:)   !< g at the start (problems with face_lazy)
     real(dp), allocatable, private :: cz(:)   !< coefficients of P_F z (muhat keeps those of g)
   contains
     procedure :: run
@@ -154,7 +157,7 @@ contains
   !> (optional, default max_steps): the step cap once a loose check has found
   !> no change (then never given up).
   subroutine run(self, problem, free, x, g, muhat, target, per_component, max_steps, loose, change_tol, &
-                 max_steps_trusted)
+                 max_steps_trusted, g_valid)
     class(face_polish_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
     logical, intent(in) :: free(:)
@@ -165,9 +168,12 @@ contains
     integer(ip), intent(in) :: max_steps
     real(dp), intent(in), optional :: loose, change_tol
     integer(ip), intent(in), optional :: max_steps_trusted
+    !> x is on the face of `free` already (x_A = l_A, C x = 0) and g = A x - b on entry: no
+    !> start correction, no product (SMALBE's polish round after a round that only released rows)
+    logical, intent(in), optional :: g_valid
     real(dp) :: rz, rz_new, pq, alpha, loose_at, ctol, aim
     integer(ip) :: n, cap
-    logical :: prec, check, switched
+    logical :: prec, check, switched, lazy, known
 
     n = problem%n
     call ensure_size(self%r, n)
@@ -187,21 +193,28 @@ contains
     self%trusted = .false.
     cap = max_steps
     prec = problem%has_preconditioner()
+    lazy = problem%face_lazy()
     loose_at = target
     ctol = 0
     if (present(change_tol)) ctol = change_tol
 
-    ! 1. onto the face: x_A = l_A, then C x = 0 by the least squares correction on F
-    x(1:n) = merge(x(1:n), problem%lower(1:n), free(1:n))
-    call problem%face_coefficient(x, muhat)
-    call problem%eq_apply_t(muhat, self%w)
-    x(1:n) = x(1:n) - merge(self%w, 0.0_dp, free(1:n))
+    known = .false.
+    if (present(g_valid)) known = g_valid
+    if (.not. known) then
+      ! 1. onto the face: x_A = l_A, then C x = 0 by the least squares correction on F
+      x(1:n) = merge(x(1:n), problem%lower(1:n), free(1:n))
+      call problem%face_coefficient(x, muhat)
+      call problem%eq_apply_t(muhat, self%w)
+      x(1:n) = x(1:n) - merge(self%w, 0.0_dp, free(1:n))
+    end if
     call problem%track_reset()
 
     ! 2. PCPG
-    call problem%hessian(x, g)
-    self%n_hessian = 1
-    g(1:n) = g(1:n) - problem%b(1:n)
+    if (.not. known) then
+      call problem%hessian(x, g)
+      self%n_hessian = 1
+      g(1:n) = g(1:n) - problem%b(1:n)
+    end if
     call face_project(problem, free, g, self%r, muhat)
     self%r = -self%r
     self%measure0 = measure(self%r)
@@ -209,13 +222,22 @@ contains
     self%reached = self%measure <= target
     if (present(loose)) loose_at = max(loose*self%measure0, target)
     check = loose_at > target
+    if (lazy .and. .not. self%reached) then
+      call ensure_size(self%g0, n)
+      self%g0(1:n) = g(1:n)
+    end if
     if (.not. self%reached) then
       call precondition(self%z)
       self%p = self%z
       rz = problem%dot(self%r, self%z)
       call self%ritz%begin_run()
       do while (self%n_steps < cap)
-        call problem%face_operator(self%p, self%q)
+        if (lazy) then
+          ! q = A p + C^T c: g carries the C^T c terms, P_F removes them from r (step 4. takes them out of g)
+          call problem%face_operator_lazy(self%p, self%q)
+        else
+          call problem%face_operator(self%p, self%q)
+        end if
         self%n_hessian = self%n_hessian + 1
         self%n_steps = self%n_steps + 1
         pq = problem%dot(self%p, self%q)
@@ -229,6 +251,9 @@ contains
         g(1:n) = g(1:n) + alpha*self%q
         call face_project(problem, free, g, self%r, muhat)
         self%r = -self%r
+        ! every lazy_fold steps the range terms leave g (step 4.), so that they do not grow
+        ! against the residual of a long run
+        if (lazy .and. mod(self%n_steps, lazy_fold) == 0) call fold()
         self%measure = measure(self%r)
         if (self%measure <= target) then
           self%reached = .true.
@@ -283,9 +308,23 @@ contains
     ! the last projection of g, made after g last changed (the preconditioner's go to cz)
     call problem%track_reset()
     if (self%aborted) return
+    ! 4. (face_lazy) the range terms out of g (fold)
+    if (lazy .and. self%n_steps > 0) call fold()
     muhat = -muhat
 
   contains
+
+    !> (face_lazy) g - g0 = A (x - x0) + C^T c: the C^T c terms out of g, c = (C C^T)^{-1} C (g - g0)
+    !> (A (x - x0) lies in Ker C: x - x0 is a sum of face directions); the coefficients of the last
+    !> projection of g, muhat, drop by the same c (those of C^T c on the face are c). One coarse solve.
+    subroutine fold()
+      self%w(1:n) = g(1:n) - self%g0(1:n)
+      call problem%eq_range_coefficient(self%w, self%cz)
+      call problem%eq_apply_t(self%cz, self%w)
+      g(1:n) = g(1:n) - self%w(1:n)
+      muhat = muhat - self%cz
+      self%g0(1:n) = g(1:n)
+    end subroutine fold
 
     !> face_changes at the current iterate (mu = -muhat of the last projection of g): any?
     logical function loose_check()

@@ -48,6 +48,13 @@
 !> `face_operator(p, q)`, q = A p for p on the face (default: the Hessian;
 !> a problem may save work there) and `face_precondition(r, z)`, used only
 !> as P_F z, an SPD preconditioner on the face (default: precondition).
+!> A third one: a problem whose `face_lazy()` is true gives by
+!> `face_operator_lazy(p, q)` A p plus some vector C^T c of the range of C^T
+!> (cheaper: the FETI dual skips its projector), and by
+!> `eq_range_coefficient(y, c)` the coefficients of the orthogonal projection
+!> of y onto that range, (C C^T)^{-1} C y in the form eq_apply_t takes; the
+!> face solve then carries the extra terms in its gradient (P_F removes them)
+!> and takes them out once at the end (face_solve).
 !>
 !> Stopping test (what the solvers compare with tol): by default the classical
 !> ||g^P|| <= tol ||b|| and ||C x|| <= tol ||b|| in the 2-norm. A problem that
@@ -140,6 +147,9 @@ module qp_problem
     procedure :: face_coefficient => default_face_coefficient
     procedure :: face_free => default_face_free
     procedure :: face_operator => default_face_operator
+    procedure :: face_lazy => default_face_lazy
+    procedure :: face_operator_lazy => default_face_operator_lazy
+    procedure :: eq_range_coefficient => default_eq_range_coefficient
     procedure :: face_precondition => default_face_precondition
     procedure :: init_base
     procedure :: free_base
@@ -365,6 +375,32 @@ contains
     real(dp), intent(out) :: q(:)
     call self%hessian(p, q)
   end subroutine default_face_operator
+
+  !> face_operator_lazy leaves a term in the range of C^T: not by default.
+  logical function default_face_lazy(self)
+    class(qp_problem_t), intent(in) :: self
+    default_face_lazy = .false.
+    if (self%n < 0) default_face_lazy = .true.   ! never: keeps self referenced
+  end function default_face_lazy
+
+  !> q = A p (+ a term C^T c) for p on the face: face_operator by default.
+  subroutine default_face_operator_lazy(self, p, q)
+    class(qp_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: p(:)
+    real(dp), intent(out) :: q(:)
+    call self%face_operator(p, q)
+  end subroutine default_face_operator_lazy
+
+  !> c = (C C^T)^{-1} C y: needed only by a problem whose face_lazy() is true.
+  subroutine default_eq_range_coefficient(self, y, c)
+    class(qp_problem_t), intent(inout) :: self
+    real(dp), intent(in) :: y(:)
+    real(dp), intent(out) :: c(:)
+    character(len=80) :: sizes
+    write (sizes, '(2(a,i0))') 'n = ', self%n, ', size(y) = ', size(y)
+    call fatal_error('qp_problem: eq_range_coefficient not provided by this problem ('//trim(sizes)//')')
+    c = 0
+  end subroutine default_eq_range_coefficient
 
   !> The face's preconditioner before P_F: precondition by default.
   subroutine default_face_precondition(self, r, z)

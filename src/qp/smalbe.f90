@@ -902,7 +902,7 @@ contains
     logical, intent(out) :: restored      !< the first face solve was given up: x, mu as before
     integer(ip) :: n, i, budget, budget_trusted, counts(2), rounds, n_changes, prev_changes, n_predicted
     real(dp) :: wi, change_tol, loose
-    logical :: again, cycling, revisited
+    logical :: again, cycling, revisited, g_known
     logical, allocatable :: release(:)
     integer(i8), allocatable :: signatures(:, :)
     character(len=400) :: buf
@@ -918,6 +918,7 @@ contains
     signatures(:, 1) = face_signature(problem, self%free_now)
     ! without release, the wrong-sign active rows do not change the face (not counted by the loose check)
     change_tol = merge(self%tol_gp, huge(1.0_dp), self%polish_release)
+    g_known = .false.
     do while (again)
       rounds = rounds + 1
       ! at most as many steps as the solve has spent so far (at least smalbe_polish_min_steps):
@@ -934,9 +935,12 @@ contains
       loose = 0
       if (rounds < self%polish_rounds) loose = self%polish_loose
       call problem%face_init(self%free_now)
+      ! after a round that only released rows, x is that round's face solution unchanged (on the new
+      ! face too) and its gradient is known: the Lagrangian gradient without the multiplier term
+      if (g_known) self%gradient(1:n) = self%gradient(1:n) - self%ct_mu(1:n)
       call self%polish%run(problem, self%free_now, x, self%gradient, self%muhat, &
                            smalbe_polish_target*self%tol_gp, self%per_component, budget, loose, change_tol, &
-                           budget_trusted)
+                           budget_trusted, g_known)
       call problem%face_free()
       self%n_polish_rounds = self%n_polish_rounds + 1
       self%n_hessian = self%n_hessian + self%polish%n_hessian
@@ -1018,6 +1022,8 @@ contains
           call problem%project(x)
           call problem%track_reset()
         end if
+        ! only released rows (x unchanged, already on the new face): the next round needs no new gradient
+        g_known = counts(1) == 0
         call free_rows(problem, x, self%free_now)
         self%free_now(1:n) = self%free_now(1:n) .or. release
         ! a set of an earlier round again: a cycle, back to SMALBE from the projected x
