@@ -360,7 +360,8 @@ contains
 
   !> q = F p / s for p in Ker G: A p = P F p / s plus G^T (G G^T)^{-1} G F p / s,
   !> a term in the range of G^T (no coarse solve; face_solve takes the sum of
-  !> these terms out once at the end by eq_range_coefficient).
+  !> these terms out of its gradient by eq_range_coefficient every lazy_fold
+  !> steps and at the end).
   subroutine face_operator_lazy(self, p, q)
     class(dual_problem_t), intent(inout) :: self
     real(dp), intent(in) :: p(:)

@@ -13,13 +13,21 @@
 !> 2. r = -P_F g, g = A x - b, z = P_F M_F^{-1} r (M^{-1} the problem's
 !>    face_precondition on the rows F, or none), standard CG recurrences; the
 !>    gradient g follows each step (g <- g + alpha q, q = face_operator(p)
-!>    = A p), r is projected anew;
+!>    = A p), r is projected anew. A problem with face_lazy() gives instead
+!>    q = face_operator_lazy(p) = A p + C^T c: g then carries terms of the
+!>    range of C^T, which P_F removes from r and which cancel in the
+!>    Lagrangian gradient g + C^T mu of the loose checks (mu follows g); every
+!>    lazy_fold steps and at the end they leave g (`fold`: one
+!>    eq_range_coefficient of the change of g since the last fold);
 !> 3. stop when the stopping measure of r (the problem's weighted maximum
 !>    with a per-component test, else ||r||) is <= target, or after max_steps
 !>    steps, or (`aborted`) after abort_check steps or more when the mean
 !>    reduction per step so far would not reach target within abort_factor
 !>    times max_steps (CG usually speeds up; a run stopped by max_steps
 !>    keeps its iterate, an aborted one is given up).
+!> With g_valid (SMALBE's round after one that only released rows), x is
+!> already on the face and g = A x - b is given: step 1 and the product of
+!> step 2 are skipped.
 !> The multiplier that makes the face's KKT conditions hold in the least
 !> squares sense is mu = -(C_F C_F^T)^{-1} C_F g_F (returned in the form
 !> eq_apply_t takes, `muhat`), so that g + C^T mu = P_F g on F.

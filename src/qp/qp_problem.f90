@@ -54,7 +54,7 @@
 !> `eq_range_coefficient(y, c)` the coefficients of the orthogonal projection
 !> of y onto that range, (C C^T)^{-1} C y in the form eq_apply_t takes; the
 !> face solve then carries the extra terms in its gradient (P_F removes them)
-!> and takes them out once at the end (face_solve).
+!> and takes them out every few steps and at the end (face_solve's fold).
 !>
 !> Stopping test (what the solvers compare with tol): by default the classical
 !> ||g^P|| <= tol ||b|| and ||C x|| <= tol ||b|| in the 2-norm. A problem that
