@@ -279,9 +279,7 @@ contains
     class(qp_problem_t), intent(inout) :: self
     real(dp), intent(in) :: muhat(:)
     real(dp), intent(out) :: y(:)
-    character(len=80) :: sizes
-    write (sizes, '(2(a,i0))') 'n = ', self%n, ', size(muhat) = ', size(muhat)
-    call fatal_error('qp_problem: eq_apply_t not provided by this problem ('//trim(sizes)//')')
+    call not_provided(self, 'eq_apply_t', 'muhat', size(muhat))
     y = 0
   end subroutine default_eq_apply_t
 
@@ -352,9 +350,7 @@ contains
   subroutine default_face_init(self, free)
     class(qp_problem_t), intent(inout) :: self
     logical, intent(in) :: free(:)
-    character(len=80) :: sizes
-    write (sizes, '(2(a,i0))') 'n = ', self%n, ', size(free) = ', size(free)
-    call fatal_error('qp_problem: face_init not provided by this problem ('//trim(sizes)//')')
+    call not_provided(self, 'face_init', 'free', size(free))
   end subroutine default_face_init
 
   !> c = (C_F C_F^T)^{-1} C y in the form eq_apply_t takes. Collective.
@@ -362,9 +358,7 @@ contains
     class(qp_problem_t), intent(inout) :: self
     real(dp), intent(in) :: y(:)
     real(dp), intent(out) :: c(:)
-    character(len=80) :: sizes
-    write (sizes, '(2(a,i0))') 'n = ', self%n, ', size(y) = ', size(y)
-    call fatal_error('qp_problem: face_coefficient not provided by this problem ('//trim(sizes)//')')
+    call not_provided(self, 'face_coefficient', 'y', size(y))
     c = 0
   end subroutine default_face_coefficient
 
@@ -396,11 +390,20 @@ contains
     class(qp_problem_t), intent(inout) :: self
     real(dp), intent(in) :: y(:)
     real(dp), intent(out) :: c(:)
-    character(len=80) :: sizes
-    write (sizes, '(2(a,i0))') 'n = ', self%n, ', size(y) = ', size(y)
-    call fatal_error('qp_problem: eq_range_coefficient not provided by this problem ('//trim(sizes)//')')
+    call not_provided(self, 'eq_range_coefficient', 'y', size(y))
     c = 0
   end subroutine default_eq_range_coefficient
+
+  !> Stop with the message of a default binding that the problem had to override:
+  !> `what` not provided, with n and the size m of the argument `arg`.
+  subroutine not_provided(self, what, arg, m)
+    class(qp_problem_t), intent(in) :: self
+    character(len=*), intent(in) :: what, arg
+    integer, intent(in) :: m
+    character(len=80) :: sizes
+    write (sizes, '(a,i0,a,i0)') 'n = ', self%n, ', size('//arg//') = ', m
+    call fatal_error('qp_problem: '//what//' not provided by this problem ('//trim(sizes)//')')
+  end subroutine not_provided
 
   !> The face's preconditioner before P_F: precondition by default.
   subroutine default_face_precondition(self, r, z)
