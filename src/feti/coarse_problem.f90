@@ -558,6 +558,7 @@ contains
     integer :: k, nmine, ierr, info, j, jo, nf
     real(dp), allocatable :: old_w(:, :), vf(:, :), wf(:, :)
     integer(i8), allocatable :: old_keys(:)
+    integer, allocatable :: new_cols(:)
     logical, allocatable :: fresh(:)
     logical :: have_old
     have_old = .false.
@@ -595,10 +596,11 @@ contains
     if (nf == k) then
       call this%solve_many(this%upd_v, this%upd_w)
     else if (nf > 0) then
-      vf = this%upd_v(:, pack([(j, j=1, k)], fresh))
+      new_cols = pack([(j, j=1, k)], fresh)
+      vf = this%upd_v(:, new_cols)
       allocate (wf(nmine, nf))
       call this%solve_many(vf, wf)
-      this%upd_w(:, pack([(j, j=1, k)], fresh)) = wf
+      this%upd_w(:, new_cols) = wf
     end if
     this%update_solves = this%update_solves + nf
     this%upd_c = 0

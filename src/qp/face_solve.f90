@@ -180,7 +180,7 @@ contains
     !> start correction, no product (SMALBE's polish round after a round that only released rows)
     logical, intent(in), optional :: g_valid
     real(dp) :: rz, rz_new, pq, alpha, loose_at, ctol, aim
-    integer(ip) :: n, cap
+    integer(ip) :: n, cap, unfolded
     logical :: prec, check, switched, lazy, known
 
     n = problem%n
@@ -230,6 +230,7 @@ contains
     self%reached = self%measure <= target
     if (present(loose)) loose_at = max(loose*self%measure0, target)
     check = loose_at > target
+    unfolded = 0          ! updates of g since g0 (face_lazy: the range terms in g come from them)
     if (lazy .and. .not. self%reached) then
       call ensure_size(self%g0, n)
       self%g0(1:n) = g(1:n)
@@ -257,11 +258,12 @@ contains
         call self%ritz%add_alpha(alpha)
         x(1:n) = x(1:n) + alpha*self%p
         g(1:n) = g(1:n) + alpha*self%q
+        unfolded = unfolded + 1
         call face_project(problem, free, g, self%r, muhat)
         self%r = -self%r
         ! every lazy_fold steps the range terms leave g (step 4.), so that they do not grow
         ! against the residual of a long run
-        if (lazy .and. mod(self%n_steps, lazy_fold) == 0) call fold()
+        if (lazy .and. unfolded == lazy_fold) call fold()
         self%measure = measure(self%r)
         if (self%measure <= target) then
           self%reached = .true.
@@ -317,7 +319,7 @@ contains
     call problem%track_reset()
     if (self%aborted) return
     ! 4. (face_lazy) the range terms out of g (fold)
-    if (lazy .and. self%n_steps > 0) call fold()
+    if (lazy .and. unfolded > 0) call fold()
     muhat = -muhat
 
   contains
@@ -332,6 +334,7 @@ contains
       g(1:n) = g(1:n) - self%w(1:n)
       muhat = muhat - self%cz
       self%g0(1:n) = g(1:n)
+      unfolded = 0
     end subroutine fold
 
     !> face_changes at the current iterate (mu = -muhat of the last projection of g): any?
