@@ -72,6 +72,13 @@ contains
     call print_timing_table(stats)
     call log_message("('F action' and 'coarse solve' are parts of the phases that use them: dual setup, solve, "// &
                      "reconstruction)")
+    associate (op => dual%operators())
+      if (op%f_explicit() .and. op%f_explicit_after() >= 0) then
+        write (line, '(a,i0,a)') "('explicit F' was built after ", op%f_explicit_after(), &
+          " F actions (f_action = 'auto'): part of the phase running then, dual setup or solve)"
+        call log_message(trim(line))
+      end if
+    end associate
     if (p%output%write_report) call write_run_report(p, dual, solver, sol, contact, stats, seconds)
 
     status = 0

@@ -101,24 +101,55 @@ contains
   end subroutine strain_matrix
 
   !> Element stiffness ke(24,24) of the element with node coordinates x(3,8).
+  !>
+  !> B^T D B of isotropic elasticity per node pair (a, b) and Gauss point, in
+  !> closed form: with g_a = grad N_a,
+  !>
+  !>     (K_ab)_ij = lambda g_a,i g_b,j + mu g_a,j g_b,i + mu delta_ij g_a . g_b,
+  !>
+  !> which is the product of the strain matrices B_a^T D B_b written out (the
+  !> zeros of B and the structure of D skipped: about 12x fewer flops than the
+  !> dense 24x6x24 product per point). Only the blocks with a <= b are formed;
+  !> the lower ones are their transposes, so K_e is exactly symmetric.
   subroutine q1_stiffness(x, young, poisson, ke)
     real(dp), intent(in) :: x(3, 8), young, poisson
     real(dp), intent(out) :: ke(24, 24)
-    real(dp) :: d(6, 6), g(8, 3), b(6, 24), db(6, 24), detj
-    integer :: p, q, r
-    d = elasticity_matrix(young, poisson)
+    real(dp) :: g(8, 3), detj, lam, mu, lg(8, 3), mg(8, 3), dot, blk(3, 3)
+    integer :: p, q, r, a, b, i, j, ra, rb
+    lam = young*poisson/((1 + poisson)*(1 - 2*poisson))
+    mu = young/(2*(1 + poisson))
     ke = 0
     do r = -1, 1, 2
       do q = -1, 1, 2
         do p = -1, 1, 2
           call q1_gradients(x, gauss*[p, q, r], g, detj)
-          call strain_matrix(g, b)
-          db = matmul(d, b)*detj
-          ke = ke + matmul(transpose(b), db)
+          lg = (lam*detj)*g
+          mg = (mu*detj)*g
+          do b = 1, 8
+            rb = 3*(b - 1)
+            do a = 1, b
+              ra = 3*(a - 1)
+              dot = mg(a, 1)*g(b, 1) + mg(a, 2)*g(b, 2) + mg(a, 3)*g(b, 3)
+              do j = 1, 3
+                do i = 1, 3
+                  blk(i, j) = lg(a, i)*g(b, j) + mg(a, j)*g(b, i)
+                end do
+                blk(j, j) = blk(j, j) + dot
+              end do
+              ke(ra + 1:ra + 3, rb + 1:rb + 3) = ke(ra + 1:ra + 3, rb + 1:rb + 3) + blk
+            end do
+          end do
         end do
       end do
     end do
-    ke = (ke + transpose(ke))/2   ! exactly symmetric
+    ! the lower blocks (a > b) are the transposes of the upper ones
+    do b = 1, 8
+      rb = 3*(b - 1)
+      do a = b + 1, 8
+        ra = 3*(a - 1)
+        ke(ra + 1:ra + 3, rb + 1:rb + 3) = transpose(ke(rb + 1:rb + 3, ra + 1:ra + 3))
+      end do
+    end do
   end subroutine q1_stiffness
 
   !> Integrals w(4) of the 4 (bilinear) shape functions over a quadrilateral

@@ -176,18 +176,28 @@ contains
   !> (compute bound) against the implicit one's streaming of the factors
   !> (memory bound): explicit when its flops per action are at most
   !> `shared_flops_per_byte` times the implicit bytes (docs/RESULTS.md
-  !> "Shared local operators (issue 16)"). Otherwise: The model, measured (docs/RESULTS.md, "Speed
-  !> (issue 16)"): both F actions are memory bound, so one explicit action
-  !> saves time in proportion to the bytes it saves, I - E (implicit minus
-  !> explicit bytes per action); the build costs in proportion to sum n_d^3
-  !> (the Schur complement and its inverse, dense). Explicit is chosen when
-  !> E < I and sum n_d^3 / (I - E) <= `payback_flops_per_byte`, which is the
-  !> ratio at which the build is paid back after about 100 F actions (the
-  !> weak-scaling cubes at tol = 1e-6 need 110-140).
+  !> "Shared local operators (issue 16)"). Otherwise (per-subdomain operators:
+  !> distorted meshes, METIS subdomains) the build is deferred, rent or buy:
+  !> F starts implicit and the explicit operators are built once the run has
+  !> made about as many F actions as pay the build back, N = ratio actions,
+  !> ratio = sum n_d^3 / (I - E) (the build's flops over the bytes one
+  !> explicit action saves; I, E the implicit and explicit bytes per action),
+  !> and only where E < I. A run that stops before N actions never pays the
+  !> build; one that goes on pays it once the implicit actions have cost
+  !> about as much, so it spends at most about twice what the better of the
+  !> two up-front choices would have (feti_t%apply_f makes the switch).
+  !> Measured (docs/RESULTS.md "Deferred explicit F (issue 14, session 12)"):
+  !> the break-even counts were 0.8-4.3 ratio on distorted and METIS cubes,
+  !> 65-200 actions, where today's solver needs 20-100; the up-front rule
+  !> before it (explicit when ratio <= 150, "paid back after about 100
+  !> actions" for the solver of issue 16, 110-140 Hessian products) built
+  !> the operators for runs of 25-50 actions.
   subroutine choose_f_action(this, p)
     class(feti_t), intent(inout) :: this
     type(params_t), intent(in) :: p
-    real(dp), parameter :: payback_flops_per_byte = 150
+    !> F actions before the deferred explicit build per unit of the ratio
+    !> build flops / bytes saved per action (docs/RESULTS.md "Deferred explicit F")
+    real(dp), parameter :: deferred_actions_per_ratio = 1
     real(dp), parameter :: shared_flops_per_byte = 8
     integer(i8) :: mine(3), all(3)
     integer(ip), allocatable :: nd(:)
@@ -224,11 +234,18 @@ contains
               sum(int(nd, i8)**3)]
       call MPI_Allreduce(mine, all, 3, MPI_INT_I8, MPI_SUM, this%communicator, ierr)
       ratio = real(all(3), dp)/max(1.0_dp, real(all(1) - all(2), dp))
-      use_explicit = all(2) < all(1) .and. ratio <= payback_flops_per_byte
       write (line, '(a,es10.3,a,es10.3,a,f0.1,a)') 'F action (auto): implicit ', real(all(1), dp), &
         ' bytes, explicit ', real(all(2), dp), ' bytes per action on all ranks; build/saving ', ratio, &
         ' flop per byte'
       call log_message(line)
+      ! deferred build (rent or buy): implicit at first, explicit once the
+      ! implicit actions have cost about what the build costs (apply_f)
+      use_explicit = .false.
+      if (all(2) < all(1)) then
+        this%f_build_at = max(1_i8, nint(deferred_actions_per_ratio*ratio, i8))
+        this%f_regularization = p%solver%regularization
+        this%f_storage = p%solver%f_storage
+      end if
      end if
     end select
     if (use_explicit) then
@@ -238,6 +255,11 @@ contains
       else
         call log_message('F action: explicit local operators ('//trim(p%solver%f_storage)//')')
       end if
+    else if (this%f_build_at > 0) then
+      write (line, '(a,i0,a)') "F action: implicit (K^+ solves), the explicit local operators ("// &
+        trim(this%f_storage)//") from F action ", this%f_build_at + 1, &
+        " on ('auto': the implicit actions have then cost about their build)"
+      call log_message(trim(line))
     else
       call log_message('F action: implicit (K^+ solves)')
     end if

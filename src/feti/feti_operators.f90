@@ -15,6 +15,7 @@
 module feti_operators
   use kinds, only: dp, ip, i8, MPI_REAL_DP
   use logger, only: log_message
+  use timers, only: timer_start, timer_stop
   use params, only: params_t
   use decomposition, only: decomposition_t
   use subdomain, only: subdomain_t
@@ -59,6 +60,13 @@ module feti_operators
     !> the Dirichlet rows alone fix every rigid body motion of the body (setup, dirichlet_rigid_test)
     logical :: dirichlet_holds = .false.
     real(dp), allocatable :: xall(:)             !< work: concatenated primal vector
+    !> `&solver f_action = 'auto'` without classes: the explicit local operators
+    !> are built before F action number f_build_at + 1 (0: no build pending;
+    !> feti_builder's choose_f_action), with these settings
+    integer(i8) :: f_build_at = 0
+    integer(i8) :: f_built_after = -1            !< F actions before the deferred build (-1: none made)
+    real(dp) :: f_regularization = 1
+    character(len=16) :: f_storage = 'packed'
   contains
     procedure :: setup
     procedure :: apply_f
@@ -105,6 +113,8 @@ module feti_operators
     procedure :: norm_pfp
     procedure :: f_applications
     procedure :: f_explicit
+    procedure :: f_explicit_pending
+    procedure :: f_explicit_after
     procedure :: f_shared
     procedure :: f_classes
     procedure :: f_local_operator
@@ -129,11 +139,27 @@ module feti_operators
 
 contains
 
-  !> y = F x = B K^+ B^T x.
+  !> y = F x = B K^+ B^T x. With a deferred build pending (`f_action =
+  !> 'auto'`, feti_builder's choose_f_action), the explicit local operators
+  !> are built once the implicit actions have cost about what the build does
+  !> (F actions are collective, so every rank builds at the same call).
   subroutine apply_f(this, x, y)
     class(feti_t), intent(inout) :: this
     real(dp), intent(in) :: x(:)
     real(dp), intent(inout) :: y(:)
+    character(len=160) :: line
+    if (this%f_build_at > 0) then
+      if (this%f%n_applications() >= this%f_build_at) then
+        call timer_start('explicit F')
+        call this%f%build_explicit(this%b, this%subs, this%f_regularization, this%f_storage)
+        call timer_stop('explicit F')
+        this%f_built_after = this%f%n_applications()
+        this%f_build_at = 0
+        write (line, '(3a,i0,a)') "F action 'auto': implicit -> explicit local operators (", &
+          trim(this%f_storage), ') after ', this%f_built_after, ' F actions'
+        call log_message(trim(line))
+      end if
+    end if
     call this%f%apply(this%b, x, y)
   end subroutine apply_f
 
@@ -474,6 +500,21 @@ contains
     class(feti_t), intent(in) :: this
     f_explicit = this%f%is_explicit()
   end function f_explicit
+
+  !> True while F is applied implicitly with a deferred explicit build pending
+  !> (`f_action = 'auto'`; it comes after f_explicit_after() actions).
+  logical function f_explicit_pending(this)
+    class(feti_t), intent(in) :: this
+    f_explicit_pending = this%f_build_at > 0
+  end function f_explicit_pending
+
+  !> The F action count at which the explicit operators are (pending) or were
+  !> (made) built by `f_action = 'auto'`'s deferred build; -1 when none.
+  integer(i8) function f_explicit_after(this)
+    class(feti_t), intent(in) :: this
+    f_explicit_after = this%f_built_after
+    if (this%f_build_at > 0) f_explicit_after = this%f_build_at
+  end function f_explicit_after
 
   !> True when K^+ (and the explicit operators) are shared per class of
   !> congruent subdomains (`&solver share_subdomains`).

@@ -61,7 +61,7 @@ contains
     type(subdomain_classes_t), intent(out) :: classes
     logical, intent(in) :: enabled
     integer(ip) :: n, s, c, k, cnt(size(subs) + 1)
-    real(dp) :: dev, scale
+    real(dp) :: dev, scale, tol, amax
     n = size(subs, kind=ip)
     allocate (classes%class_of(n), classes%scale(n), classes%column(n), classes%member(n))
     allocate (classes%rep(n))
@@ -71,9 +71,13 @@ contains
       classes%class_of(s) = 0
       classes%scale(s) = 1
       if (enabled) then
+        tol = share_tolerance(subs(s))
+        amax = 0
+        if (allocated(subs(s)%K%values)) amax = maxval(abs(subs(s)%K%values))
         do c = 1, min(classes%nclass, max_classes)
-          call stiffness_deviation(subs(s), subs(classes%rep(c)), scale, dev)
-          if (dev <= share_tolerance(subs(s))) then
+          ! (stops at the first entry beyond tol: a distorted or METIS subdomain is told apart at once)
+          call stiffness_deviation(subs(s), subs(classes%rep(c)), scale, dev, tol, amax)
+          if (dev <= tol) then
             classes%class_of(s) = c
             classes%scale(s) = scale
             classes%max_deviation = max(classes%max_deviation, dev)
@@ -140,28 +144,51 @@ contains
   end function share_tolerance
 
   !> c = K^a(1,1) / K^b(1,1) and dev = max|K^a - c K^b| / max|K^a| when the
-  !> two matrices have the same order and pattern; dev = huge otherwise.
-  subroutine stiffness_deviation(a, b, c, dev)
+  !> two matrices have the same order and pattern; dev = huge otherwise. With
+  !> `limit`, the comparison stops at the first entry whose difference exceeds
+  !> limit max|K^a| and returns that entry's relative difference (> limit):
+  !> enough for the test dev <= limit, in O(1) for matrices that differ early.
+  !> `a_max`: max|K^a| when the caller has it (one subdomain against many).
+  subroutine stiffness_deviation(a, b, c, dev, limit, a_max)
     type(subdomain_t), intent(in) :: a, b
     real(dp), intent(out) :: c, dev
-    integer(ip) :: k
-    real(dp) :: amax
+    real(dp), intent(in), optional :: limit, a_max
+    integer(ip) :: k, nrow
+    real(dp) :: amax, bound, d
     c = 1
     dev = huge(1.0_dp)
     if (a%ndof /= b%ndof .or. a%nelem /= b%nelem) return
     if (.not. allocated(a%K%values) .or. .not. allocated(b%K%values)) return
     if (size(a%K%values) /= size(b%K%values)) return
-    if (any(a%K%rowptr /= b%K%rowptr)) return
-    if (any(a%K%colind /= b%K%colind)) return
+    nrow = size(a%K%rowptr, kind=ip)
+    if (size(b%K%rowptr, kind=ip) /= nrow) return
     if (.not. (a%K%values(1) > 0 .and. b%K%values(1) > 0)) return
     ! the first stored entry of row 1 is the diagonal when colind(1) = 1
     if (a%K%colind(1) /= 1) return
     c = a%K%values(1)/b%K%values(1)
-    amax = maxval(abs(a%K%values))
+    if (present(a_max)) then
+      amax = a_max
+    else
+      amax = maxval(abs(a%K%values))
+    end if
+    bound = huge(1.0_dp)
+    if (present(limit)) bound = limit*amax
+    ! values and column indices in one pass (the row pointers after it: equal
+    ! column indices in a different row split are still a different pattern)
     dev = 0
     do k = 1, size(a%K%values, kind=ip)
-      dev = max(dev, abs(a%K%values(k) - c*b%K%values(k)))
+      if (a%K%colind(k) /= b%K%colind(k)) then
+        dev = huge(1.0_dp)
+        return
+      end if
+      d = abs(a%K%values(k) - c*b%K%values(k))
+      dev = max(dev, d)
+      if (dev > bound) exit
     end do
+    if (any(a%K%rowptr /= b%K%rowptr)) then
+      dev = huge(1.0_dp)
+      return
+    end if
     dev = dev/amax
   end subroutine stiffness_deviation
 end module subdomain_classes
