@@ -186,12 +186,12 @@ contains
   !> build; one that goes on pays it once the implicit actions have cost
   !> about as much, so it spends at most about twice what the better of the
   !> two up-front choices would have (feti_t%apply_f makes the switch).
-  !> Measured (docs/RESULTS.md "Deferred explicit F (issue 14, session 12)"):
-  !> the break-even counts were 0.8-4.3 ratio on distorted and METIS cubes,
-  !> 65-200 actions, where today's solver needs 20-100; the up-front rule
-  !> before it (explicit when ratio <= 150, "paid back after about 100
+  !> Measured (docs/RESULTS.md "Deferred explicit F"): the break-even counts
+  !> were 0.27-2.5 times the ratio (median 1) on 11 distorted and METIS
+  !> cubes, 45-170 actions, where today's solver makes 20-100; the up-front
+  !> rule before it (explicit when ratio <= 150, "paid back after about 100
   !> actions" for the solver of issue 16, 110-140 Hessian products) built
-  !> the operators for runs of 25-50 actions.
+  !> the operators for runs of 25-60 actions.
   subroutine choose_f_action(this, p)
     class(feti_t), intent(inout) :: this
     type(params_t), intent(in) :: p
@@ -242,7 +242,7 @@ contains
       ! implicit actions have cost about what the build costs (apply_f)
       use_explicit = .false.
       if (all(2) < all(1)) then
-        this%f_build_at = max(1_i8, nint(deferred_actions_per_ratio*ratio, i8))
+        this%f_build_at = max(1_i8, nint(min(deferred_actions_per_ratio*ratio, 1.0e15_dp), i8))
         this%f_regularization = p%solver%regularization
         this%f_storage = p%solver%f_storage
       end if

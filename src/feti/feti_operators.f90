@@ -585,5 +585,7 @@ contains
     if (allocated(this%xall)) deallocate (this%xall)
     this%n_local_subs = 0
     this%pfp_norm = 0
+    this%f_build_at = 0
+    this%f_built_after = -1
   end subroutine free
 end module feti_operators
