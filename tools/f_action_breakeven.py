@@ -21,7 +21,8 @@ over the repetitions give one Markdown row per case:
 - break-even: build time / saving per action, saving = (implicit - explicit F action
   time) / F actions: the number of F actions after which the build has paid for itself;
 - what `f_action = 'auto'` does: the program's own choice in a third run with the
-  default setting (its log line), and report.json performance.f_explicit_after.
+  default setting (report.json performance.f_action and f_explicit_after), and that
+  run's total time (one run, after the repetitions of the two others).
 
 Example (docs/RESULTS.md "Deferred explicit F"):
     tools/f_action_breakeven.py --reps 3 --out output/f_action \\
@@ -112,10 +113,12 @@ def main():
         m = re.search(r"build/saving\s+([0-9.]+)", log)
         if m:
             ratio = float(m.group(1))
+        auto_total = float("nan")
         if rc != 0 or report is None:
             status = 1
             auto = "exit %d" % rc
         else:
+            auto_total = timer(report, "total")
             after = report["performance"].get("f_explicit_after", -1)
             if report["performance"]["f_action"] == "explicit":
                 auto = "explicit after %d actions" % after if after >= 0 else "explicit from the start"
@@ -130,13 +133,14 @@ def main():
         build = med("explicit", lambda r: timer(r, "explicit F"))
         saving = (f_i - f_e)/acts
         breakeven = build/saving if saving > 0 else float("inf")
-        rows.append("| %s | %s | %d | %d | %.3f / %.3f | %.4f / %.4f | %.3f | %.0f | %s | %s |" % (
+        rows.append("| %s | %s | %d | %d | %.3f / %.3f | %.4f / %.4f | %.3f | %.0f | %s | %s | %.3f |" % (
             name, "%.1f" % ratio if ratio else "-", runs["implicit"][0]["solver"]["hessian_multiplications"],
             acts, t_i, t_e, f_i, f_e, build, breakeven,
-            "%.2f" % (breakeven/ratio) if ratio else "-", auto))
+            "%.2f" % (breakeven/ratio) if ratio else "-", auto, auto_total))
     print("| case | ratio [flop/byte] | Hessian | F actions | total implicit / explicit [s] | "
-          "F action implicit / explicit [s] | build [s] | break-even [actions] | break-even / ratio | 'auto' |")
-    print("|---|---:|---:|---:|---|---|---:|---:|---:|---|")
+          "F action implicit / explicit [s] | build [s] | break-even [actions] | break-even / ratio | 'auto' | "
+          "'auto' total [s] (one run) |")
+    print("|---|---:|---:|---:|---|---|---:|---:|---:|---|---:|")
     for r in rows:
         print(r)
     return status

@@ -31,7 +31,7 @@ if p.returncode != 0:
 rows = {}
 for line in p.stdout.splitlines():
     cells = [c.strip() for c in line.strip().strip("|").split("|")]
-    if len(cells) == 10 and cells[0] in ("short", "long"):
+    if len(cells) == 11 and cells[0] in ("short", "long"):
         rows[cells[0]] = cells
 for name in ("short", "long"):
     if name not in rows:
