@@ -194,14 +194,15 @@ contains
     class(b_operator_t), intent(inout) :: this
     real(dp), intent(in) :: x(:)
     real(dp), intent(out) :: z(:)
-    integer(ip) :: ls, e
+    integer(ip) :: ls
     call this%con%exchange%gather(x, this%wloc)
     do ls = 1, this%nlocal
-      z(6*ls - 5:6*ls) = 0
       associate (bs => this%con%b(ls))
-        do e = 1, bs%nentries
-          z(6*ls - 5:6*ls) = z(6*ls - 5:6*ls) + bs%g(:, e)*this%wloc(bs%row(e))
-        end do
+        if (bs%nentries > 0) then
+          call g_block(bs%nentries, bs%row, bs%g, this%wloc, z(6*ls - 5:6*ls))
+        else
+          z(6*ls - 5:6*ls) = 0
+        end if
       end associate
     end do
   end subroutine apply_g
@@ -211,17 +212,44 @@ contains
     class(b_operator_t), intent(inout) :: this
     real(dp), intent(in) :: z(:)
     real(dp), intent(inout) :: y(:)
-    integer(ip) :: ls, e
+    integer(ip) :: ls
     this%wloc2 = 0
     do ls = 1, this%nlocal
       associate (bs => this%con%b(ls))
-        do e = 1, bs%nentries
-          this%wloc2(bs%row(e)) = this%wloc2(bs%row(e)) + dot_product(bs%g(:, e), z(6*ls - 5:6*ls))
-        end do
+        if (bs%nentries > 0) call gt_block(bs%nentries, bs%row, bs%g, z(6*ls - 5:6*ls), this%wloc2)
       end associate
     end do
     call this%con%exchange%scatter_add(this%wloc2, y)
   end subroutine apply_gt
+
+  !> z = sum_e g(:, e) w(row(e)): the 6-block of G x of one subdomain (the
+  !> hot loop of every projection; explicit-shape arrays, so that the
+  !> compiler sees unit strides and no aliasing).
+  pure subroutine g_block(n, row, g, w, z)
+    integer(ip), intent(in) :: n, row(n)
+    real(dp), intent(in) :: g(6, n), w(*)
+    real(dp), intent(out) :: z(6)
+    integer(ip) :: e
+    real(dp) :: acc(6)
+    acc = 0
+    do e = 1, n
+      acc = acc + g(:, e)*w(row(e))
+    end do
+    z = acc
+  end subroutine g_block
+
+  !> w(row(e)) += g(:, e) . z for every entry e of one subdomain: its part of
+  !> G^T z (the dot product summed left to right, as dot_product does).
+  pure subroutine gt_block(n, row, g, z, w)
+    integer(ip), intent(in) :: n, row(n)
+    real(dp), intent(in) :: g(6, n), z(6)
+    real(dp), intent(inout) :: w(*)
+    integer(ip) :: e
+    do e = 1, n
+      w(row(e)) = w(row(e)) + (g(1, e)*z(1) + g(2, e)*z(2) + g(3, e)*z(3) + &
+                               g(4, e)*z(4) + g(5, e)*z(5) + g(6, e)*z(6))
+    end do
+  end subroutine gt_block
 
   !> Entries of B on this rank.
   integer(i8) function n_entries(this)
