@@ -26,13 +26,20 @@ module q1_element
 
 contains
 
+  !> Lame's parameters lambda, mu of Young's modulus and Poisson's ratio.
+  pure subroutine lame(young, poisson, lambda, mu)
+    real(dp), intent(in) :: young, poisson
+    real(dp), intent(out) :: lambda, mu
+    lambda = young*poisson/((1 + poisson)*(1 - 2*poisson))
+    mu = young/(2*(1 + poisson))
+  end subroutine lame
+
   !> Isotropic elasticity matrix D (6x6, Voigt order above).
   pure function elasticity_matrix(young, poisson) result(d)
     real(dp), intent(in) :: young, poisson
     real(dp) :: d(6, 6), lambda, mu
     integer :: i
-    lambda = young*poisson/((1 + poisson)*(1 - 2*poisson))
-    mu = young/(2*(1 + poisson))
+    call lame(young, poisson, lambda, mu)
     d = 0
     d(1:3, 1:3) = lambda
     do i = 1, 3
@@ -116,8 +123,7 @@ contains
     real(dp), intent(out) :: ke(24, 24)
     real(dp) :: g(8, 3), detj, lam, mu, lg(8, 3), mg(8, 3), dot, blk(3, 3)
     integer :: p, q, r, a, b, i, j, ra, rb
-    lam = young*poisson/((1 + poisson)*(1 - 2*poisson))
-    mu = young/(2*(1 + poisson))
+    call lame(young, poisson, lam, mu)
     ke = 0
     do r = -1, 1, 2
       do q = -1, 1, 2

@@ -2,8 +2,8 @@
 """tools/f_action_breakeven.py on two small distorted cubes (1 rank, 1 repetition) and, through
 it, `f_action = 'auto'`'s deferred build end to end: a run that makes fewer F actions than the
 model's break-even estimate N = round(ratio) stays implicit, one that makes more switches to the
-explicit operators after exactly N actions (report.json performance.f_explicit_after), and both
-converge with either f_action. The table's numbers are the tool's arithmetic on the reports.
+explicit operators after N actions (report.json performance.f_explicit_after; N within the
+table's rounding of the ratio), and both converge with either f_action. The table's numbers are the tool's arithmetic on the reports.
 """
 import argparse
 import os
@@ -47,8 +47,9 @@ for name in ("short", "long"):
         if auto != "implicit":
             failures.append("%s: %d F actions <= N = %d, but 'auto' did %r" % (name, actions, n, auto))
     else:
+        # N = nint(ratio) in the program; the table prints ratio to one decimal
         m = re.match(r"explicit after (\d+) actions", auto)
-        if not m or int(m.group(1)) != n:
+        if not m or abs(int(m.group(1)) - max(1.0, ratio)) > 0.55:
             failures.append("%s: %d F actions > N = %d, but 'auto' did %r" % (name, actions, n, auto))
     if not float(c[7]) > 0:
         failures.append("%s: no positive build time" % name)
