@@ -16,6 +16,13 @@
 !>   3. one thread per rank.
 !> The count reported is the one the library answers after that (a sequential
 !> build answers 1 whatever is asked).
+!>
+!> Before that, and before any BLAS call, an OpenBLAS that fell back to its
+!> generic kernels ("Prescott": the CPU model is newer than the library, as
+!> Debian 12's 0.3.21 on Intel's Emerald Rapids) on a CPU with AVX2 and FMA
+!> chooses its kernels again, SkylakeX or Haswell by what the CPU has
+!> (fc_openblas_core in blas_threads_c.c); the user's OPENBLAS_CORETYPE is
+!> never overridden. The log line and report.json say which kernels run.
 module blas_threads
   use, intrinsic :: iso_c_binding, only: c_int, c_char, c_null_char
   use kinds, only: path_len
@@ -39,6 +46,8 @@ module blas_threads
     integer :: requested = 1       !< threads per rank asked by the source
     logical :: settable = .false.  !< the library can run more than one thread
     logical :: uniform = .true.    !< every rank has the same thread count
+    character(len=32) :: core = ''          !< OpenBLAS's kernel table ('' for another BLAS), e.g. 'SkylakeX'
+    character(len=32) :: core_before = ''   !< the table OpenBLAS chose itself, when it was chosen again
   end type blas_info_t
 
   ! the kinds of BLAS of blas_threads_c.c (0: reference or unknown)
@@ -67,6 +76,11 @@ module blas_threads
       import :: c_int
       integer(c_int), value :: kind
     end function fc_blas_get_threads
+    integer(c_int) function fc_openblas_core(before, before_len, after, after_len) bind(C, name='fc_openblas_core')
+      import :: c_int, c_char
+      character(kind=c_char), intent(out) :: before(*), after(*)
+      integer(c_int), value :: before_len, after_len
+    end function fc_openblas_core
     subroutine fc_blas_set_threads(kind, n) bind(C, name='fc_blas_set_threads')
       import :: c_int
       integer(c_int), value :: kind, n
@@ -84,7 +98,8 @@ contains
     type(MPI_Comm), intent(in) :: comm
     character(len=64) :: value
     character(len=:), allocatable :: text, user_variable, library
-    integer(c_int) :: owner, mask, k, threaded
+    character(kind=c_char, len=32) :: core_before, core_after
+    integer(c_int) :: owner, mask, k, threaded, switched
     integer :: requested, counts(2), ierr
     logical :: valid, given
 
@@ -104,6 +119,15 @@ contains
     ! 2. the library that provides dgemm_, and every thread control in the process
     owner = fc_blas_owner_kind()
     mask = fc_blas_kinds()
+    info%core = ''
+    info%core_before = ''
+    if (btest(mask, kind_openblas)) then          ! before any BLAS call: the kernels OpenBLAS runs
+      core_before = c_null_char
+      core_after = c_null_char
+      switched = fc_openblas_core(core_before, int(len(core_before), c_int), core_after, int(len(core_after), c_int))
+      info%core = c_text(core_after)
+      if (switched /= 0) info%core_before = c_text(core_before)
+    end if
     library = c_text(describe(owner, threaded))
     info%settable = threaded /= 0
     do k = kind_openblas, kind_mkl
@@ -176,6 +200,12 @@ contains
     end if
     if (b%source /= blas_threads_variable) line = line//'; '//blas_threads_variable//' overrides'
     line = line//')'
+    if (len_trim(b%core) > 0) then
+      line = line//', kernels '//trim(b%core)
+      if (len_trim(b%core_before) > 0) line = line//' (OpenBLAS chose its generic '//trim(b%core_before)// &
+                                          ' kernels for this CPU, which it does not know; chosen again by the '// &
+                                          "CPU's instruction sets; OPENBLAS_CORETYPE overrides)"
+    end if
   end function blas_log_line
 
   ! ---- helpers ----

@@ -13,6 +13,12 @@
  *             char *bli_info_get_version_str(void) (dim_t is int64_t on LP64 builds)
  *   MKL:      void MKL_Set_Num_Threads(int); int MKL_Get_Max_Threads(void);
  *             void MKL_Get_Version_String(char *, int)
+ *   OpenBLAS built with DYNAMIC_ARCH (Debian's) also exports
+ *             char *openblas_get_corename(void), and the pair
+ *             void gotoblas_dynamic_quit(void); void gotoblas_dynamic_init(void)
+ *             that forgets and chooses again the table of kernels; the choice
+ *             reads OPENBLAS_CORETYPE when it is set (the library's documented
+ *             variable), else the CPU model.
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -21,6 +27,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 /* Kinds of BLAS; the same values are parameters of the Fortran module. */
 enum { FC_BLAS_UNKNOWN = 0, FC_BLAS_OPENBLAS = 1, FC_BLAS_BLIS = 2, FC_BLAS_MKL = 3 };
@@ -155,6 +162,45 @@ int fc_blas_get_threads(int kind) {
   default:
     return 1;
   }
+}
+
+/* OpenBLAS's kernels for a CPU newer than the library. A DYNAMIC_ARCH build
+ * chooses its kernel table from the CPU's family and model when it is loaded;
+ * a model the release does not know gets the generic "Prescott" table (SSE3,
+ * 2 doubles per instruction): Debian 12's OpenBLAS 0.3.21 on an Intel family 6
+ * model 207 (Emerald Rapids) runs DGEMM 3-4x below its AVX-512 kernels. When
+ * OpenBLAS answers "Prescott" (no CPU of the last fifteen years is one) on a
+ * CPU that has AVX2 and FMA, the table is chosen again, before any BLAS call,
+ * as SkylakeX (with AVX-512 F, CD, DQ, BW and VL) or Haswell (AVX2 and FMA):
+ * OpenBLAS checks itself that the CPU and the operating system support what
+ * it is forced to, and falls back when they do not. A user who set
+ * OPENBLAS_CORETYPE (even to Prescott) is never overridden.
+ * Returns 0 when nothing was done, 1 when the table was chosen again; `before`
+ * and `after` receive the core names ("" when the library has none). */
+int fc_openblas_core(char *before, int before_len, char *after, int after_len) {
+  get_str_fn corename = (get_str_fn)symbol("openblas_get_corename");
+  void (*quit)(void) = (void (*)(void))symbol("gotoblas_dynamic_quit");
+  void (*init)(void) = (void (*)(void))symbol("gotoblas_dynamic_init");
+  const char *user = getenv("OPENBLAS_CORETYPE");
+  const char *target = NULL;
+  copy_text(before, before_len, corename ? corename() : "");
+  copy_text(after, after_len, corename ? corename() : "");
+  if (!corename || !quit || !init || (user && user[0])) return 0;
+  if (strcasecmp(corename(), "Prescott") != 0) return 0;
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512cd") && __builtin_cpu_supports("avx512dq") &&
+      __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512vl"))
+    target = "SkylakeX";
+  else if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
+    target = "Haswell";
+  if (!target) return 0;
+  /* the variable only for the library's new choice; the user's environment is left as it was */
+  if (setenv("OPENBLAS_CORETYPE", target, 1) != 0) return 0;
+  quit();
+  init();
+  unsetenv("OPENBLAS_CORETYPE");
+  copy_text(after, after_len, corename());
+  return 1;
 }
 
 /* Ask the BLAS of `kind` to use `n` threads (nothing when it has no control). */

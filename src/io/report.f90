@@ -131,10 +131,12 @@ contains
     json = w%text()
   end function memory_json
 
-  !> {"library", "path", "threads", "source", "multithreaded"}: the BLAS in use,
-  !> its threads per rank and what set them (see blas_threads).
-  function blas_json(library, path, threads, source, multithreaded) result(json)
-    character(len=*), intent(in) :: library, path, source
+  !> {"library", "path", "threads", "source", "multithreaded", "core",
+  !> "core_chosen_by_library"}: the BLAS in use, its threads per rank and what
+  !> set them, OpenBLAS's kernel table and the one it chose itself before
+  !> blas_threads chose again ('' when it did not; see blas_threads).
+  function blas_json(library, path, threads, source, multithreaded, core, core_before) result(json)
+    character(len=*), intent(in) :: library, path, source, core, core_before
     integer, intent(in) :: threads
     logical, intent(in) :: multithreaded
     character(len=:), allocatable :: json
@@ -145,6 +147,8 @@ contains
     call w%add('threads', threads)
     call w%add('source', source)
     call w%add('multithreaded', multithreaded)
+    call w%add('core', core)
+    call w%add('core_chosen_by_library', core_before)
     call w%end_object()
     json = w%text()
   end function blas_json

@@ -160,7 +160,8 @@ contains
       call js%end_object()
     end block
     associate (b => blas_in_use())                 ! set up by the main program
-      call js%add_raw('blas', blas_json(trim(b%library), trim(b%path), b%threads, trim(b%source), b%settable))
+      call js%add_raw('blas', blas_json(trim(b%library), trim(b%path), b%threads, trim(b%source), b%settable, &
+                                         trim(b%core), trim(b%core_before)))
     end associate
     call js%begin_object('performance')
     call js%add('f_bytes_per_action_sum', f_bytes)

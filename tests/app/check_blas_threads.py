@@ -12,6 +12,18 @@ Runs the case through run_case.py with different environments and reads the
     (and says which BLAS was found), the count must then be 1;
   - FETICONTACT_BLAS_THREADS=abc: exit status 2 (input error) on every rank,
     with a message that names the variable.
+OpenBLAS's kernels (blas.core, blas.core_chosen_by_library; fc_openblas_core in
+src/external/blas_threads_c.c), when the BLAS is OpenBLAS:
+  - default run: blas.core is named; where the library fell back to its
+    generic Prescott kernels on a CPU with AVX2 and FMA (/proc/cpuinfo), the
+    program chose again: core_chosen_by_library is 'Prescott', core is SkylakeX
+    (the CPU has AVX-512 F, CD, DQ, BW, VL) or Haswell, and the log says so;
+    otherwise core_chosen_by_library is '' (the library's choice kept);
+  - OPENBLAS_CORETYPE=Prescott (the user's choice) is never overridden: core
+    'Prescott', core_chosen_by_library '';
+  - OPENBLAS_CORETYPE=Haswell on a CPU with AVX2 and FMA: core 'Haswell' (a
+    build that chooses its kernels at run time), and then the default run must
+    not be left on Prescott.
 Exit status 0 when every check passes.
 """
 import argparse
@@ -22,7 +34,7 @@ import sys
 
 # variables a BLAS reads for its thread count (removed for the default run)
 THREAD_VARIABLES = ["FETICONTACT_BLAS_THREADS", "OPENBLAS_NUM_THREADS", "GOTO_NUM_THREADS", "BLIS_NUM_THREADS",
-                    "MKL_NUM_THREADS", "OMP_NUM_THREADS"]
+                    "MKL_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_CORETYPE"]
 FAILURES = []
 PASSED = []
 
@@ -56,9 +68,60 @@ def blas_of(workdir, name):
     check(isinstance(blas, dict), "%s: report.json has a 'blas' object" % name)
     if not isinstance(blas, dict):
         return None
-    for key, kind in [("library", str), ("path", str), ("threads", int), ("source", str), ("multithreaded", bool)]:
+    for key, kind in [("library", str), ("path", str), ("threads", int), ("source", str), ("multithreaded", bool),
+                      ("core", str), ("core_chosen_by_library", str)]:
         check(isinstance(blas.get(key), kind), "%s: blas.%s is a %s" % (name, key, kind.__name__))
     return blas
+
+
+def cpu_flags():
+    """The instruction-set flags of the first CPU in /proc/cpuinfo (empty set when unreadable)."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("flags"):
+                    return set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return set()
+
+
+def check_kernels(args, blas, out):
+    """OpenBLAS's kernel table: chosen again only from the generic one, never against the user."""
+    if not blas.get("library", "").startswith("OpenBLAS"):
+        check(blas["core"] == "", "default: blas.core is empty for %s (got %r)" % (blas["library"], blas["core"]))
+        return
+    flags = cpu_flags()
+    avx512 = {"avx512f", "avx512cd", "avx512dq", "avx512bw", "avx512vl"} <= flags
+    avx2 = {"avx2", "fma"} <= flags
+    core, before = blas["core"], blas["core_chosen_by_library"]
+    print("OpenBLAS kernels: %r (chosen by the library: %r); CPU AVX2+FMA %s, AVX-512 %s" % (core, before, avx2, avx512))
+    check(core != "", "default: blas.core names OpenBLAS's kernels")
+    check(("kernels " + core) in out, "default: the log's BLAS line names the kernels %s" % core)
+    if before:
+        check(before == "Prescott", "default: chosen again only from the generic Prescott (got %r)" % before)
+        check(core == ("SkylakeX" if avx512 else "Haswell"),
+              "default: the kernels chosen again match the CPU (got %r, AVX-512 %s)" % (core, avx512))
+        check("OpenBLAS chose its generic Prescott kernels" in out, "default: the log says the kernels were chosen again")
+
+    # the user's OPENBLAS_CORETYPE is kept, even the generic one
+    workdir, out = run(args, "user_prescott", {"OPENBLAS_CORETYPE": "Prescott"}, ["--check", "report"])
+    user = blas_of(workdir, "user_prescott")
+    if user:
+        check(user["core"] == "Prescott" and user["core_chosen_by_library"] == "",
+              "user_prescott: OPENBLAS_CORETYPE=Prescott kept (core %r, chosen again from %r)"
+              % (user["core"], user["core_chosen_by_library"]))
+    if not avx2:
+        print("skipped: OPENBLAS_CORETYPE=Haswell and the default's kernels: the CPU has no AVX2 and FMA")
+        return
+    workdir, out = run(args, "user_haswell", {"OPENBLAS_CORETYPE": "Haswell"}, ["--check", "report"])
+    user = blas_of(workdir, "user_haswell")
+    if user and user["core"] == "Haswell":
+        # the library chooses its kernels at run time: the default must not be the generic table
+        check(core != "Prescott", "default: a CPU with AVX2 and FMA does not run the generic Prescott kernels")
+    elif user:
+        print("skipped: the default's kernels: OPENBLAS_CORETYPE=Haswell gave %r (a build without run-time "
+              "choice)" % user["core"])
 
 
 def main():
@@ -80,6 +143,8 @@ def main():
         check(blas["threads"] == 1, "default: blas.threads == 1 (got %s)" % blas["threads"])
         check(blas["source"] == "default", "default: blas.source == 'default' (got %r)" % blas["source"])
     check("BLAS: " in out and "1 thread per rank (default" in out, "default: the log has the BLAS line")
+    if blas:
+        check_kernels(args, blas, out)
 
     # 2. FETICONTACT_BLAS_THREADS=2
     workdir, out = run(args, "threads2", {"FETICONTACT_BLAS_THREADS": "2"}, ["--check", "report"])
