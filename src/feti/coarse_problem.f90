@@ -50,7 +50,7 @@ module coarse_problem
   implicit none
   private
 
-  public :: coarse_layout_t, build_coarse_layout, owned_row_blocks, row_blocks
+  public :: coarse_layout_t, build_coarse_layout, ensure_row_blocks, row_blocks
   public :: coarse_options_t, group_starts, choose_coarse_ranks, estimated_factor_bytes, ranks_per_node
 
   !> How the coarse problem is factorized (&solver coarse_ranks, coarse_blr,
@@ -301,7 +301,6 @@ contains
     logical, intent(in) :: full_pattern
     integer(ip), allocatable, intent(out) :: irn(:), jcn(:)
     real(dp), allocatable, intent(out) :: a(:)
-    real(dp), allocatable :: slots_own(:, :)
     integer(ip) :: i, j1, j2, nb, pos(8)
     real(dp) :: blk(6, 8)
     type(block_hash_t) :: blocks
@@ -311,8 +310,8 @@ contains
 
     comm = this%comm
     rank = this%rank
-    ! 1. the 6-blocks of every row, by copy slot, summed at the owner
-    call owned_row_blocks(con, slots_own)
+    ! 1. the 6-blocks of every row, by copy slot, summed at the owner (once per run)
+    call ensure_row_blocks(con)
 
     ! 2. g_r g_r^T of every owned row into 6x6 blocks
     call blocks%init(max(64_ip, 8*this%layout%nlocal + con%n_own/4))
@@ -320,7 +319,7 @@ contains
       keep = .true.
       if (present(mask)) keep = mask(i)
       if (.not. (keep .or. full_pattern)) cycle
-      call row_blocks(dec, con, this%layout, slots_own, i, nb, pos, blk)
+      call row_blocks(dec, con, this%layout, i, nb, pos, blk)
       if (.not. keep) blk = 0
       do j1 = 1, nb
         do j2 = j1, nb
@@ -416,15 +415,21 @@ contains
     end subroutine add_product
   end subroutine assemble
 
-  !> The column of G of every owned row, by copy slot: slots(6(j-1)+1:6j, i) is
-  !> the 6-block of row i on the j-th subdomain copy of its node (zero where
-  !> the row does not touch that copy). Each rank computes the blocks of its
-  !> own subdomains; one neighbour scatter-add sums them at the row's owner.
-  subroutine owned_row_blocks(con, slots_own)
+  !> The nonzero 6-blocks of G^T of every owned row by copy slot, in `con`
+  !> (constraints_t g_row_*), unless they are there already: each rank
+  !> computes the blocks of its own subdomains, one neighbour scatter-add
+  !> sums them at the row's owner, and the blocks that are not zero are kept
+  !> (at most 8 copies of a node; a gluing row touches 2). G does not change
+  !> during a run, so every later coarse assembly (the faces of the polish,
+  !> the standard reconstruction) reads them instead of summing again
+  !> (issue 14, session 13: the 48 x rows arrays of that sum, zeroed anew at
+  !> every assembly, were a quarter of a 4096-subdomain run's time in page
+  !> faults). Collective the first time.
+  subroutine ensure_row_blocks(con)
     type(constraints_t), intent(inout) :: con
-    real(dp), allocatable, intent(out) :: slots_own(:, :)
-    real(dp), allocatable :: slots_local(:, :)
-    integer(ip) :: ls, e, i
+    real(dp), allocatable :: slots_local(:, :), slots_own(:, :)
+    integer(ip) :: ls, e, i, j, k
+    if (con%g_rows_ready) return
     allocate (slots_local(48, con%n_local), slots_own(48, con%n_own))
     slots_local = 0
     do ls = 1, size(con%b, kind=ip)
@@ -436,26 +441,45 @@ contains
       end associate
     end do
     call con%exchange%scatter_add_multi(48, slots_local, slots_own)
-  end subroutine owned_row_blocks
+    deallocate (slots_local)
+    allocate (con%g_row_first(con%n_own + 1))
+    k = 0
+    do i = 1, con%n_own
+      con%g_row_first(i) = k + 1
+      do j = 1, 8
+        if (any(slots_own(6*j - 5:6*j, i) /= 0)) k = k + 1
+      end do
+    end do
+    con%g_row_first(con%n_own + 1) = k + 1
+    allocate (con%g_row_slot(k), con%g_row_block(6, k))
+    k = 0
+    do i = 1, con%n_own
+      do j = 1, 8
+        if (all(slots_own(6*j - 5:6*j, i) == 0)) cycle
+        k = k + 1
+        con%g_row_slot(k) = j
+        con%g_row_block(:, k) = slots_own(6*j - 5:6*j, i)
+      end do
+    end do
+    con%g_rows_ready = .true.
+  end subroutine ensure_row_blocks
 
   !> The nonzero 6-blocks of owned row i of G^T and the coarse positions of
-  !> their subdomains: blk(:, 1:nb), pos(1:nb).
-  subroutine row_blocks(dec, con, layout, slots_own, i, nb, pos, blk)
+  !> their subdomains: blk(:, 1:nb), pos(1:nb) (ensure_row_blocks first).
+  subroutine row_blocks(dec, con, layout, i, nb, pos, blk)
     type(decomposition_t), intent(in) :: dec
     type(constraints_t), intent(in) :: con
     type(coarse_layout_t), intent(in) :: layout
-    real(dp), intent(in) :: slots_own(:, :)
     integer(ip), intent(in) :: i
     integer(ip), intent(out) :: nb, pos(8)
     real(dp), intent(out) :: blk(6, 8)
-    integer(ip) :: copies(8), ncopies, j
+    integer(ip) :: copies(8), ncopies, k
     call dec%node_subdomain_list(con%node(i), copies, ncopies)
     nb = 0
-    do j = 1, ncopies
-      if (all(slots_own(6*j - 5:6*j, i) == 0)) cycle
+    do k = con%g_row_first(i), con%g_row_first(i + 1) - 1
       nb = nb + 1
-      pos(nb) = layout%position(copies(j))
-      blk(:, nb) = slots_own(6*j - 5:6*j, i)
+      pos(nb) = layout%position(copies(con%g_row_slot(k)))
+      blk(:, nb) = con%g_row_block(:, k)
     end do
   end subroutine row_blocks
 

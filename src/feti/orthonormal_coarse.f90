@@ -37,7 +37,7 @@ module orthonormal_coarse
   use errors, only: collective_error, exit_input_error, exit_internal
   use decomposition, only: decomposition_t
   use constraints, only: constraints_t
-  use coarse_problem, only: coarse_layout_t, owned_row_blocks, row_blocks
+  use coarse_problem, only: coarse_layout_t, ensure_row_blocks, row_blocks
   use mpi_f08, only: MPI_Comm, MPI_Allreduce, MPI_IN_PLACE, MPI_SUM, MPI_MAX, MPI_Wtime, MPI_INTEGER
   implicit none
   private
@@ -109,7 +109,6 @@ contains
     type(constraints_t), intent(inout) :: con
     type(coarse_layout_t), intent(in) :: layout
     type(MPI_Comm), intent(in) :: comm
-    real(dp), allocatable :: slots_own(:, :)
     integer(ip), allocatable :: first(:), per_block(:), group_of_block(:)
     integer(ip) :: ls, i, j, a, b, k, g, p, nb, pos(8), r0, h, kk
     real(dp) :: blk(6, 8), t0
@@ -133,13 +132,13 @@ contains
 
     ! 1. the 6-blocks of every row, by copy slot, summed at the row's owner
     t0 = MPI_Wtime()
-    call owned_row_blocks(con, slots_own)
+    call ensure_row_blocks(con)
 
     ! 2. G G^T = sum over rows of g_r g_r^T, dense; first block of every column
     allocate (this%l(this%n, this%n), first(this%n_own))
     this%l = 0
     do i = 1, this%n_own
-      call row_blocks(dec, con, layout, slots_own, i, nb, pos, blk)
+      call row_blocks(dec, con, layout, i, nb, pos, blk)
       first(i) = this%nsub
       if (nb > 0) first(i) = minval(pos(1:nb))
       do b = 1, nb
@@ -202,7 +201,7 @@ contains
       this%column_row(this%group_col(g) + kk) = i
       r0 = this%group_row(g)
       h = this%n - r0 + 1
-      call row_blocks(dec, con, layout, slots_own, i, nb, pos, blk)
+      call row_blocks(dec, con, layout, i, nb, pos, blk)
       do a = 1, nb
         this%values(this%group_offset(g) + int(kk, i8)*h + 6*pos(a) - 5 - r0 + 1: &
                     this%group_offset(g) + int(kk, i8)*h + 6*pos(a) - r0 + 1) = blk(:, a)
