@@ -72,8 +72,20 @@ contains
 
     mydofs = sum(this%subs(:)%ndof)
     call timer_start('factorization')
+    ! the ordering: `local_ordering = 'auto'` by the largest subdomain of the run (the same on every rank)
+    block
+      integer(i8) :: largest
+      character(len=160) :: line
+      largest = 0
+      if (this%n_local_subs > 0) largest = maxval(this%subs(:)%ndof)
+      call MPI_Allreduce(MPI_IN_PLACE, largest, 1, MPI_INT_I8, MPI_MAX, comm, ierr)
+      this%ordering_used = local_ordering_for(p%solver%local_ordering, largest)
+      write (line, '(5a,i0,a)') 'local ordering (', trim(p%solver%local_ordering), '): ', &
+        trim(this%ordering_used), ' (largest subdomain ', largest, ' dofs)'
+      call log_message(trim(line))
+    end block
     ! hybrid TFETI keeps the per-unit K^+ (sharing between clusters is not measured yet)
-    call this%f%init(this%subs, p%solver%local_solver, p%solver%regularization, p%solver%local_ordering, &
+    call this%f%init(this%subs, p%solver%local_solver, p%solver%regularization, this%ordering_used, &
                      int(mydofs, ip), share=merge('none', p%solver%share_subdomains(1:4), this%hybrid))
     block
       character(len=160) :: line

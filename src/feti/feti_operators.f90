@@ -16,7 +16,7 @@ module feti_operators
   use kinds, only: dp, ip, i8, MPI_REAL_DP
   use logger, only: log_message
   use timers, only: timer_start, timer_stop
-  use params, only: params_t
+  use params, only: params_t, local_ordering_for
   use decomposition, only: decomposition_t
   use subdomain, only: subdomain_t
   use box_mesh, only: box_mesh_t
@@ -67,6 +67,9 @@ module feti_operators
     integer(i8) :: f_built_after = -1            !< F actions before the deferred build (-1: none made)
     real(dp) :: f_regularization = 1
     character(len=16) :: f_storage = 'packed'
+    !> the ordering of the subdomain factorizations used ('amd' | 'metis'; `&solver local_ordering`,
+    !> resolved by params::local_ordering_for from the largest subdomain of the run)
+    character(len=8) :: ordering_used = ''
   contains
     procedure :: setup
     procedure :: apply_f
@@ -115,6 +118,7 @@ module feti_operators
     procedure :: f_explicit
     procedure :: f_explicit_pending
     procedure :: f_explicit_after
+    procedure :: local_ordering
     procedure :: f_shared
     procedure :: f_classes
     procedure :: f_local_operator
@@ -515,6 +519,13 @@ contains
     f_explicit_after = this%f_built_after
     if (this%f_build_at > 0) f_explicit_after = this%f_build_at
   end function f_explicit_after
+
+  !> The ordering of the subdomain factorizations this run used ('amd' or 'metis').
+  function local_ordering(this) result(name)
+    class(feti_t), intent(in) :: this
+    character(len=8) :: name
+    name = this%ordering_used
+  end function local_ordering
 
   !> True when K^+ (and the explicit operators) are shared per class of
   !> congruent subdomains (`&solver share_subdomains`).

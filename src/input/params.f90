@@ -15,7 +15,10 @@ module params
   private
 
   public :: read_params, check_params, echo_params, default_params, param_items, group_names
-  public :: auto_cluster, resolve_cluster
+  public :: auto_cluster, resolve_cluster, local_ordering_for
+
+  !> local_ordering = 'auto': MUMPS's AMD up to this many dofs in the largest subdomain, METIS above
+  integer(i8), parameter, public :: amd_max_dofs = 1500
 
   integer, parameter :: msg_len = 1024
 
@@ -102,7 +105,7 @@ module params
     logical :: polish_first = .true.          !< polish before the first outer iteration from every contact row at its bound
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
-    character(len=name_len) :: local_ordering = 'metis'  !< 'metis' | 'amd'
+    character(len=name_len) :: local_ordering = 'auto'  !< 'auto' | 'metis' | 'amd' (local_ordering_for)
     character(len=name_len) :: local_solver = 'block'    !< 'block' | 'subdomain'
     !> how F is applied: 'implicit' (K^+ solves) | 'explicit' (dense local
     !> operators, BLAS) | 'auto' (the cheaper one by the measured cost model)
@@ -729,8 +732,8 @@ contains
         call fail('solver', 'power_iterations', 'must be >= 1', ints([s%power_iterations]))
       if (.not. one_of(s%coarse, [character(len=8) :: 'mumps', 'cholesky'])) &
         call fail('solver', 'coarse', "must be 'mumps' or 'cholesky'", s%coarse)
-      if (.not. one_of(s%local_ordering, [character(len=8) :: 'amd', 'metis'])) &
-        call fail('solver', 'local_ordering', "must be 'amd' or 'metis'", s%local_ordering)
+      if (.not. one_of(s%local_ordering, [character(len=8) :: 'auto', 'amd', 'metis'])) &
+        call fail('solver', 'local_ordering', "must be 'auto', 'amd' or 'metis'", s%local_ordering)
       if (.not. one_of(s%coarse_placement, [character(len=12) :: 'auto', 'redundant', 'distributed'])) &
         call fail('solver', 'coarse_placement', "must be 'auto', 'redundant' or 'distributed'", s%coarse_placement)
       if (s%coarse_ranks < 0) &
@@ -785,6 +788,24 @@ contains
             ' (got '//trim(got)//')'
     end subroutine fail
   end subroutine check_params
+
+  !> The ordering of the subdomain factorizations that `&solver local_ordering`
+  !> asks for, when the largest subdomain (or cluster) of the run has
+  !> `max_ndof` dofs: 'amd' and 'metis' as given; 'auto' (the default) is
+  !> MUMPS's AMD up to amd_max_dofs dofs and METIS nested dissection above.
+  !> Measured (docs/RESULTS.md "Local ordering: AMD on small subdomains (issue
+  !> 14, session 13)", distorted and METIS cubes of 64 subdomains, 2 ranks):
+  !> AMD 4-6% less total time at 4^3 and 6^3 elements per subdomain (375 and
+  !> 1029 dofs: no METIS call per subdomain, the same factor and solve times),
+  !> METIS 7% less at 8^3 (2187 dofs: its factors make the solves faster).
+  pure function local_ordering_for(requested, max_ndof) result(used)
+    character(len=*), intent(in) :: requested
+    integer(i8), intent(in) :: max_ndof
+    character(len=8) :: used
+    used = requested
+    if (requested /= 'auto') return
+    used = merge('amd     ', 'metis   ', max_ndof <= amd_max_dofs)
+  end function local_ordering_for
 
   !> `&mesh cluster = 0, 0, 0` (the default): replace it by `auto_cluster`'s
   !> choice for `nranks` ranks, and record that and why (cluster_auto,

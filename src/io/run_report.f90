@@ -166,6 +166,8 @@ contains
     call js%begin_object('performance')
     call js%add('f_bytes_per_action_sum', f_bytes)
     call js%add('f_action', trim(merge('explicit', 'implicit', op%f_explicit())))
+    ! the ordering of the subdomain factorizations (&solver local_ordering = 'auto' resolved)
+    call js%add('local_ordering', trim(op%local_ordering()))
     ! f_action = 'auto''s deferred build: the F actions made before it (-1: none made or pending)
     call js%add('f_explicit_after', merge(op%f_explicit_after(), -1_i8, op%f_explicit()))
     call js%add('f_shared', op%f_shared())
