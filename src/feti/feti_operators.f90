@@ -13,7 +13,7 @@
 !> private: the layers above use the operators and the accessors below,
 !> never the data behind them.
 module feti_operators
-  use kinds, only: dp, ip, i8, MPI_REAL_DP
+  use kinds, only: dp, ip, i8, name_len, MPI_REAL_DP
   use logger, only: log_message
   use timers, only: timer_start, timer_stop
   use params, only: params_t, local_ordering_for
@@ -66,7 +66,7 @@ module feti_operators
     integer(i8) :: f_build_at = 0
     integer(i8) :: f_built_after = -1            !< F actions before the deferred build (-1: none made)
     real(dp) :: f_regularization = 1
-    character(len=16) :: f_storage = 'packed'
+    character(len=name_len) :: f_storage = 'packed'   !< &solver f_storage (the same length)
     !> the ordering of the subdomain factorizations used ('amd' | 'metis'; `&solver local_ordering`,
     !> resolved by params::local_ordering_for from the largest subdomain of the run)
     character(len=8) :: ordering_used = ''
