@@ -5,7 +5,7 @@ module lapack_interfaces
   use kinds, only: dp
   implicit none
   private
-  public :: dpotrf, dpotri, dsyev, dsymv, dspmv, dgemv, dgemm, dtrsm, dtrsv
+  public :: dpotrf, dpotri, dsyev, dsymv, dspmv, dgemv, dgemm, dtrsm, dtrsv, dsyrk, dtpsv, dpptri
 
   interface
     !> Cholesky factor of a symmetric positive definite matrix.
@@ -82,5 +82,30 @@ module lapack_interfaces
       real(dp), intent(in) :: a(lda, *)
       real(dp), intent(inout) :: x(*)
     end subroutine dtrsv
+    !> C <- alpha op(A) op(A)^T + beta C, C symmetric (triangle `uplo`).
+    subroutine dsyrk(uplo, trans, n, k, alpha, a, lda, beta, c, ldc)
+      import :: dp
+      character(len=1), intent(in) :: uplo, trans
+      integer, intent(in) :: n, k, lda, ldc
+      real(dp), intent(in) :: alpha, beta, a(lda, *)
+      real(dp), intent(inout) :: c(ldc, *)
+    end subroutine dsyrk
+    !> x <- op(A)^{-1} x, A triangular in packed storage.
+    subroutine dtpsv(uplo, trans, diag, n, ap, x, incx)
+      import :: dp
+      character(len=1), intent(in) :: uplo, trans, diag
+      integer, intent(in) :: n, incx
+      real(dp), intent(in) :: ap(*)
+      real(dp), intent(inout) :: x(*)
+    end subroutine dtpsv
+    !> Inverse of a symmetric positive definite matrix from its packed
+    !> Cholesky factor (dpptrf's, or dpotrf's triangle packed).
+    subroutine dpptri(uplo, n, ap, info)
+      import :: dp
+      character(len=1), intent(in) :: uplo
+      integer, intent(in) :: n
+      real(dp), intent(inout) :: ap(*)
+      integer, intent(out) :: info
+    end subroutine dpptri
   end interface
 end module lapack_interfaces

@@ -1,7 +1,10 @@
 !> F = B K^+ B^T, the dual operator of TFETI, with K^+ of the rank's
 !> subdomains behind local_inverse_t (`&solver local_solver`: 'block', one
-!> block-diagonal factorization, or 'subdomain', one per subdomain). B is
-!> passed in: F owns only K^+, the explicit local operators and work vectors.
+!> block-diagonal MUMPS factorization, 'subdomain', one per subdomain, or
+!> 'dense', kplus_dense split along the dofs B touches, factorized by
+!> build_dense once B is known and applied through the Cholesky factors of
+!> the Schur complements on those dofs, `apply_dense`). B is passed in: F
+!> owns only K^+, the explicit local operators and work vectors.
 !> Timer 'F action'.
 !>
 !> Two ways to apply F (`&solver f_action`, docs/THEORY.md "Explicit local
@@ -20,7 +23,7 @@
 !>   subdomain up to 7 times), so S^_s is smaller than F^s itself.
 module f_operator
   use kinds, only: dp, ip, i8
-  use lapack_interfaces, only: dpotrf, dpotri, dsymv, dspmv, dgemv
+  use lapack_interfaces, only: dpotrf, dpotri, dsymv, dspmv, dgemv, dpptri
   use errors, only: fatal_error
   use timers, only: timer_start, timer_stop
   use subdomain, only: subdomain_t
@@ -28,6 +31,7 @@ module f_operator
   use kplus_block, only: kplus_block_t
   use kplus_set, only: kplus_set_t
   use kplus_shared, only: kplus_shared_t
+  use kplus_dense, only: kplus_dense_t
   use subdomain_classes, only: subdomain_classes_t, find_classes
   use class_operator, only: class_operator_t, sandwich
   use b_operator, only: b_operator_t
@@ -46,6 +50,9 @@ module f_operator
     integer(ip), allocatable :: doff(:)           !< (nsub+1) dof offsets in the concatenated vector
     ! ---- explicit local operators (built by build_explicit)
     logical :: explicit = .false.
+    ! ---- dense split K^+ (`local_solver = 'dense'`, built by build_dense once B is known)
+    logical :: dense = .false.                    !< built: F through the factors of the Schur complements
+    logical :: dense_pending = .false.            !< chosen by init, waiting for B
     character(len=16) :: storage = 'symmetric'    !< 'symmetric' | 'packed' | 'general'
     integer(ip), allocatable :: nd(:)             !< (nsub) dofs touched by B^s
     integer(i8), allocatable :: soff(:)           !< (nsub+1) offsets of S^_s in smat
@@ -63,6 +70,8 @@ module f_operator
   contains
     procedure :: init
     procedure :: build_explicit
+    procedure :: build_dense
+    procedure :: is_dense
     procedure :: is_explicit
     procedure :: explicit_bytes
     procedure :: touched_dofs
@@ -114,12 +123,17 @@ contains
         call k%init_classes(subs, this%classes, regularization, ordering)
       end select
     else
-      if (local_solver == 'block') then
+      select case (local_solver)
+      case ('dense')
+        ! factorized by build_dense once B says which dofs it touches
+        allocate (kplus_dense_t :: this%kinv)
+        this%dense_pending = .true.
+      case ('block')
         allocate (kplus_block_t :: this%kinv)
-      else
+      case default
         allocate (kplus_set_t :: this%kinv)
-      end if
-      call this%kinv%init(subs, regularization, ordering)
+      end select
+      if (.not. this%dense_pending) call this%kinv%init(subs, regularization, ordering)
     end if
     allocate (this%xall(n_concat))
     this%nsub = size(subs, kind=ip)
@@ -144,10 +158,11 @@ contains
     type(subdomain_t), intent(in) :: subs(:)
     real(dp), intent(in) :: regularization
     character(len=*), intent(in) :: storage
-    integer(ip), allocatable :: row(:), dof(:), cmap(:), dofs(:)
-    real(dp), allocatable :: val(:), sd(:, :)
-    integer(ip) :: s, e, ne, ndmax, n, i, j
+    integer(ip), allocatable :: dofs(:), tptr(:), touched(:)
+    real(dp), allocatable :: sd(:, :), up(:)
+    integer(ip) :: s, n, j
     integer(i8) :: o
+    integer :: info
 
     if (storage /= 'symmetric' .and. storage /= 'packed' .and. storage /= 'general') &
       call fatal_error("f_operator%build_explicit: unknown storage '"//trim(storage)//"'")
@@ -157,16 +172,10 @@ contains
       return
     end if
     this%storage = storage
-    this%n_local_rows = b%n_local_rows()
-    this%nd = this%touched_dofs(b)
-    allocate (this%soff(this%nsub + 1), this%eoff(this%nsub + 1))
-    ne = 0
-    this%eoff(1) = 0
+    if (.not. this%dense) call local_rows(this, b, subs, tptr, touched)
+    allocate (this%soff(this%nsub + 1))
     this%soff(1) = 0
     do s = 1, this%nsub
-      call b%subdomain_entries(s, row, dof, val)
-      ne = ne + size(row, kind=ip)
-      this%eoff(s + 1) = ne
       n = this%nd(s)
       if (storage == 'packed') then
         this%soff(s + 1) = this%soff(s) + int(n, i8)*(n + 1)/2
@@ -174,30 +183,32 @@ contains
         this%soff(s + 1) = this%soff(s) + int(n, i8)*n
       end if
     end do
-    allocate (this%erow(ne), this%edof(ne), this%eval(ne), this%smat(this%soff(this%nsub + 1)))
-    ndmax = maxval([0_ip, this%nd])
-    allocate (this%wloc(max(1, this%n_local_rows)), this%wloc2(max(1, this%n_local_rows)), &
-              this%t(max(1, ndmax)), this%u(max(1, ndmax)))
-
+    allocate (this%smat(this%soff(this%nsub + 1)))
     do s = 1, this%nsub
-      ! B^_s: the entries of B^s with the touched dofs numbered 1..n_d
-      call b%subdomain_entries(s, row, dof, val)
-      dofs = dof
-      call sort_unique(dofs, n)
-      dofs = dofs(1:n)
-      if (allocated(cmap)) deallocate (cmap)
-      allocate (cmap(subs(s)%ndof))
-      cmap = 0
-      do i = 1, n
-        cmap(dofs(i)) = i
-      end do
-      do e = 1, size(row, kind=ip)
-        this%erow(this%eoff(s) + e) = row(e)
-        this%edof(this%eoff(s) + e) = cmap(dof(e))
-        this%eval(this%eoff(s) + e) = val(e)
-      end do
+      n = this%nd(s)
       if (n == 0) cycle
-      call touched_inverse(subs(s), regularization, dofs, sd, this%build_flop_count)
+      if (this%dense) then
+        ! S^_s from the packed Cholesky factor of the Schur complement that
+        ! the dense K^+ already holds (LAPACK dpptri: 2 n^3 / 3 flops)
+        select type (k => this%kinv)
+        type is (kplus_dense_t)
+          up = k%touched(s)
+        end select
+        call timer_start('explicit F: inverse')
+        call dpptri('U', n, up, info)
+        call timer_stop('explicit F: inverse')
+        if (info /= 0) call fatal_error('f_operator%build_explicit: the Schur complement of K_reg is not '// &
+                                        'positive definite (LAPACK dpptri failed)')
+        this%build_flop_count = this%build_flop_count + 2*real(n, dp)**3/3
+        if (allocated(sd)) deallocate (sd)
+        allocate (sd(n, n))
+        do j = 1, n
+          sd(1:j, j) = up(int(j, i8)*(j - 1)/2 + 1:int(j, i8)*(j + 1)/2)
+        end do
+      else
+        dofs = touched(tptr(s) + 1:tptr(s + 1))
+        call touched_inverse(subs(s), regularization, dofs, sd, this%build_flop_count)
+      end if
       o = this%soff(s)
       do j = 1, n
         if (storage == 'packed') then
@@ -210,6 +221,107 @@ contains
     end do
     this%explicit = .true.
   end subroutine build_explicit
+
+  !> B^_s of every local subdomain: the entries of B^s with the n_d dofs
+  !> that B^s touches numbered 1..n_d (ascending local dof numbers), and those
+  !> dofs (touched(tptr(s)+1:tptr(s+1))); work vectors. Local.
+  subroutine local_rows(this, b, subs, tptr, touched)
+    type(f_operator_t), intent(inout) :: this
+    type(b_operator_t), intent(in) :: b
+    type(subdomain_t), intent(in) :: subs(:)
+    integer(ip), allocatable, intent(out) :: tptr(:), touched(:)
+    integer(ip), allocatable :: row(:), dof(:), cmap(:), dofs(:)
+    real(dp), allocatable :: val(:)
+    integer(ip) :: s, e, ne, ndmax, n, i
+    this%n_local_rows = b%n_local_rows()
+    this%nd = this%touched_dofs(b)
+    allocate (this%eoff(this%nsub + 1), tptr(this%nsub + 1))
+    ne = 0
+    this%eoff(1) = 0
+    tptr(1) = 0
+    do s = 1, this%nsub
+      call b%subdomain_entries(s, row, dof, val)
+      ne = ne + size(row, kind=ip)
+      this%eoff(s + 1) = ne
+      tptr(s + 1) = tptr(s) + this%nd(s)
+    end do
+    allocate (this%erow(ne), this%edof(ne), this%eval(ne), touched(tptr(this%nsub + 1)))
+    ndmax = maxval([0_ip, this%nd])
+    allocate (this%wloc(max(1, this%n_local_rows)), this%wloc2(max(1, this%n_local_rows)), &
+              this%t(max(1, ndmax)), this%u(max(1, ndmax)))
+    do s = 1, this%nsub
+      call b%subdomain_entries(s, row, dof, val)
+      dofs = dof
+      call sort_unique(dofs, n)
+      touched(tptr(s) + 1:tptr(s + 1)) = dofs(1:n)
+      if (allocated(cmap)) deallocate (cmap)
+      allocate (cmap(subs(s)%ndof))
+      cmap = 0
+      do i = 1, n
+        cmap(dofs(i)) = i
+      end do
+      do e = 1, size(row, kind=ip)
+        this%erow(this%eoff(s) + e) = row(e)
+        this%edof(this%eoff(s) + e) = cmap(dof(e))
+        this%eval(this%eoff(s) + e) = val(e)
+      end do
+    end do
+  end subroutine local_rows
+
+  !> `local_solver = 'dense'`: factorize every local K_reg split along the
+  !> dofs B touches (kplus_dense), now that B is known; F is applied through
+  !> the Cholesky factors of the Schur complements on those dofs from now on
+  !> (`apply_dense`). Local (no communication).
+  subroutine build_dense(this, b, subs, regularization)
+    class(f_operator_t), intent(inout) :: this
+    type(b_operator_t), intent(in) :: b
+    type(subdomain_t), intent(in) :: subs(:)
+    real(dp), intent(in) :: regularization
+    integer(ip), allocatable :: tptr(:), touched(:)
+    if (.not. this%dense_pending) call fatal_error('f_operator%build_dense: init did not choose the dense solver')
+    if (size(subs, kind=ip) /= this%nsub) call fatal_error('f_operator%build_dense: subs differ from init')
+    call local_rows(this, b, subs, tptr, touched)
+    select type (k => this%kinv)
+    type is (kplus_dense_t)
+      call k%init_split(subs, regularization, tptr, touched)
+    end select
+    this%dense_pending = .false.
+    this%dense = .true.
+  end subroutine build_dense
+
+  !> True when K^+ is the dense split solver (built or pending).
+  logical function is_dense(this)
+    class(f_operator_t), intent(in) :: this
+    is_dense = this%dense .or. this%dense_pending
+  end function is_dense
+
+  !> y = sum_s B^_s S_s^{-1} B^_s^T x with the packed Cholesky factors of the
+  !> Schur complements S_s (two triangular solves per subdomain).
+  subroutine apply_dense(this, b, x, y)
+    type(f_operator_t), intent(inout) :: this
+    type(b_operator_t), intent(inout) :: b
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(inout) :: y(:)
+    integer(ip) :: s, e, n
+    call b%gather_rows(x, this%wloc)
+    this%wloc2 = 0
+    select type (k => this%kinv)
+    type is (kplus_dense_t)
+      do s = 1, this%nsub
+        n = this%nd(s)
+        if (n == 0) cycle
+        this%t(1:n) = 0
+        do e = this%eoff(s) + 1, this%eoff(s + 1)
+          this%t(this%edof(e)) = this%t(this%edof(e)) + this%eval(e)*this%wloc(this%erow(e))
+        end do
+        call k%solve_touched(s, this%t(1:n))
+        do e = this%eoff(s) + 1, this%eoff(s + 1)
+          this%wloc2(this%erow(e)) = this%wloc2(this%erow(e)) + this%eval(e)*this%t(this%edof(e))
+        end do
+      end do
+    end select
+    call b%scatter_rows(this%wloc2, y)
+  end subroutine apply_dense
 
   !> n_d of every local subdomain: the number of dofs B^s touches (the
   !> order of S^_s), without building anything.
@@ -244,6 +356,8 @@ contains
       call this%shared_op%apply(b, x, y)
     else if (this%explicit) then
       call apply_explicit(this, b, x, y)
+    else if (this%dense) then
+      call apply_dense(this, b, x, y)
     else
       this%xall = 0
       call b%add_transpose(x, 1.0_dp, this%xall)
@@ -305,6 +419,16 @@ contains
   integer(i8) function implicit_bytes(this, b)
     class(f_operator_t), intent(in) :: this
     type(b_operator_t), intent(in) :: b
+    integer(ip) :: s
+    if (this%dense) then
+      ! dense split K^+: the packed factor of every Schur complement twice,
+      ! the entries of B^_s twice, 4 passes over the local dual rows
+      implicit_bytes = 2*16*b%n_entries() + 4*8*int(b%n_local_rows(), i8)
+      do s = 1, this%nsub
+        implicit_bytes = implicit_bytes + 2*8*(int(this%nd(s), i8)*(this%nd(s) + 1)/2)
+      end do
+      return
+    end if
     implicit_bytes = 2*this%kinv%factor_bytes() + 2*16*b%n_entries() + 12*8*int(size(this%xall), i8) + &
                      4*8*int(b%n_local_rows(), i8)
   end function implicit_bytes
@@ -413,6 +537,8 @@ contains
     this%classes = subdomain_classes_t()
     this%sharing = .false.
     this%explicit = .false.
+    this%dense = .false.
+    this%dense_pending = .false.
     this%build_flop_count = 0
     this%applications = 0
     this%nsub = 0

@@ -80,12 +80,13 @@ contains
       if (this%n_local_subs > 0) largest = maxval(this%subs(:)%ndof)
       call MPI_Allreduce(MPI_IN_PLACE, largest, 1, MPI_INT_I8, MPI_MAX, comm, ierr)
       this%ordering_used = local_ordering_for(p%solver%local_ordering, largest)
+      this%solver_used = local_solver_for(p%solver%local_solver, largest, this%hybrid)
       write (line, '(5a,i0,a)') 'local ordering (', trim(p%solver%local_ordering), '): ', &
         trim(this%ordering_used), ' (largest subdomain ', largest, ' dofs)'
       call log_message(trim(line))
     end block
     ! hybrid TFETI keeps the per-unit K^+ (sharing between clusters is not measured yet)
-    call this%f%init(this%subs, p%solver%local_solver, p%solver%regularization, this%ordering_used, &
+    call this%f%init(this%subs, this%solver_used, p%solver%regularization, this%ordering_used, &
                      int(mydofs, ip), share=merge('none', p%solver%share_subdomains(1:4), this%hybrid))
     block
       character(len=160) :: line
@@ -113,6 +114,25 @@ contains
     allocate (this%xall(this%b%n_concat()))
     call timer_stop('B and G')
     call memory_mark('B and G')
+
+    ! the dense split K^+ needs the dofs B touches: factorized now
+    if (this%f%is_dense()) then
+      call timer_start('factorization')
+      call this%f%build_dense(this%b, this%subs, p%solver%regularization)
+      call timer_stop('factorization')
+    end if
+    block
+      character(len=200) :: line
+      if (this%f%is_shared()) then
+        write (line, '(3a)') 'local solver (', trim(p%solver%local_solver), '): K^+ shared per class'
+      else if (this%f%is_dense()) then
+        write (line, '(3a)') 'local solver (', trim(p%solver%local_solver), &
+          '): dense, split along the dofs B touches (F through the Schur complements'' Cholesky factors)'
+      else
+        write (line, '(4a)') 'local solver (', trim(p%solver%local_solver), '): ', trim(this%solver_used)
+      end if
+      call log_message(trim(line))
+    end block
 
     call timer_start('explicit F')
     call choose_f_action(this, p)

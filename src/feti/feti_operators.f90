@@ -16,7 +16,7 @@ module feti_operators
   use kinds, only: dp, ip, i8, name_len, MPI_REAL_DP
   use logger, only: log_message
   use timers, only: timer_start, timer_stop
-  use params, only: params_t, local_ordering_for
+  use params, only: params_t, local_ordering_for, local_solver_for
   use decomposition, only: decomposition_t
   use subdomain, only: subdomain_t
   use box_mesh, only: box_mesh_t
@@ -70,6 +70,9 @@ module feti_operators
     !> the ordering of the subdomain factorizations used ('amd' | 'metis'; `&solver local_ordering`,
     !> resolved by params::local_ordering_for from the largest subdomain of the run)
     character(len=8) :: ordering_used = ''
+    !> the local solver asked of f_operator ('dense' | 'block' | 'subdomain'; `&solver local_solver`,
+    !> resolved by params::local_solver_for; classes of congruent subdomains override it)
+    character(len=10) :: solver_used = ''
   contains
     procedure :: setup
     procedure :: apply_f
@@ -119,6 +122,7 @@ module feti_operators
     procedure :: f_explicit_pending
     procedure :: f_explicit_after
     procedure :: local_ordering
+    procedure :: local_solver
     procedure :: f_shared
     procedure :: f_classes
     procedure :: f_local_operator
@@ -526,6 +530,15 @@ contains
     character(len=8) :: name
     name = this%ordering_used
   end function local_ordering
+
+  !> The local solver this run used: 'shared' (per class of congruent
+  !> subdomains), 'dense', 'block' or 'subdomain'.
+  function local_solver(this) result(name)
+    class(feti_t), intent(in) :: this
+    character(len=10) :: name
+    name = this%solver_used
+    if (this%f%is_shared()) name = 'shared'
+  end function local_solver
 
   !> True when K^+ (and the explicit operators) are shared per class of
   !> congruent subdomains (`&solver share_subdomains`).

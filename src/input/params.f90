@@ -15,10 +15,12 @@ module params
   private
 
   public :: read_params, check_params, echo_params, default_params, param_items, group_names
-  public :: auto_cluster, resolve_cluster, local_ordering_for
+  public :: auto_cluster, resolve_cluster, local_ordering_for, local_solver_for
 
   !> local_ordering = 'auto': MUMPS's AMD up to this many dofs in the largest subdomain, METIS above
   integer(i8), parameter, public :: amd_max_dofs = 1500
+  !> local_solver = 'auto': the dense split K^+ up to this many dofs in the largest subdomain
+  integer(i8), parameter, public :: dense_max_dofs = 700
 
   integer, parameter :: msg_len = 1024
 
@@ -106,7 +108,7 @@ module params
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'auto'  !< 'auto' | 'metis' | 'amd' (local_ordering_for)
-    character(len=name_len) :: local_solver = 'block'    !< 'block' | 'subdomain'
+    character(len=name_len) :: local_solver = 'auto'     !< 'auto' | 'dense' | 'block' | 'subdomain' (local_solver_for)
     !> how F is applied: 'implicit' (K^+ solves) | 'explicit' (dense local
     !> operators, BLAS) | 'auto' (the cheaper one by the measured cost model)
     character(len=name_len) :: f_action = 'auto'
@@ -669,6 +671,9 @@ contains
         if (p%solver%f_action == 'explicit') call fail('mesh', 'cluster', &
           "> 1 (hybrid TFETI) works with &solver f_action = 'implicit' or 'auto' (which then stays implicit)", &
           ints(m%cluster))
+        if (p%solver%local_solver == 'dense') call fail('mesh', 'cluster', &
+          "> 1 (hybrid TFETI) works with &solver local_solver = 'auto', 'block' or 'subdomain', not 'dense'", &
+          ints(m%cluster))
       end if
       if (status == 0 .and. product(int(m%nsub, 8)) * product(int(m%nel, 8)) > 2**27) &
         call fail('mesh', 'nsub, nel', 'give at most 2**27 elements in all', &
@@ -744,8 +749,8 @@ contains
                   "'distributed' = all ranks), not both", ints([s%coarse_ranks])//', '//trim(s%coarse_placement))
       if (.not. (s%coarse_blr >= 0 .and. s%coarse_blr < 1)) &
         call fail('solver', 'coarse_blr', 'must be in [0, 1) (0: full-rank factors)', reals([s%coarse_blr]))
-      if (.not. one_of(s%local_solver, [character(len=10) :: 'block', 'subdomain'])) &
-        call fail('solver', 'local_solver', "must be 'block' or 'subdomain'", s%local_solver)
+      if (.not. one_of(s%local_solver, [character(len=10) :: 'auto', 'dense', 'block', 'subdomain'])) &
+        call fail('solver', 'local_solver', "must be 'auto', 'dense', 'block' or 'subdomain'", s%local_solver)
       if (.not. one_of(s%f_action, [character(len=10) :: 'implicit', 'explicit', 'auto'])) &
         call fail('solver', 'f_action', "must be 'implicit', 'explicit' or 'auto'", s%f_action)
       if (.not. one_of(s%f_storage, [character(len=10) :: 'symmetric', 'packed', 'general'])) &
@@ -807,6 +812,24 @@ contains
     used = merge('amd     ', 'metis   ', max_ndof <= amd_max_dofs)
   end function local_ordering_for
 
+  !> The local solver that `&solver local_solver` asks for, when the largest
+  !> subdomain (or cluster) of the run has `max_ndof` dofs; `hybrid`: clusters
+  !> (hybrid TFETI). 'dense', 'block' and 'subdomain' as given; 'auto' (the
+  !> default) is the dense split K^+ (kplus_dense) up to dense_max_dofs dofs
+  !> in plain TFETI, one MUMPS factorization per rank ('block') otherwise.
+  !> Where the subdomains form classes of congruent ones (share_subdomains),
+  !> K^+ is shared per class whatever this says. Measured in docs/RESULTS.md
+  !> "Dense local solver (issue 14, session 14)".
+  pure function local_solver_for(requested, max_ndof, hybrid) result(used)
+    character(len=*), intent(in) :: requested
+    integer(i8), intent(in) :: max_ndof
+    logical, intent(in) :: hybrid
+    character(len=10) :: used
+    used = requested
+    if (requested /= 'auto') return
+    used = merge('dense     ', 'block     ', max_ndof <= dense_max_dofs .and. .not. hybrid)
+  end function local_solver_for
+
   !> `&mesh cluster = 0, 0, 0` (the default): replace it by `auto_cluster`'s
   !> choice for `nranks` ranks, and record that and why (cluster_auto,
   !> cluster_choice). Explicit values are left as they are.
@@ -852,6 +875,8 @@ contains
         reason = "plain TFETI: hybrid TFETI does not take &solver preconditioner = 'dirichlet'"
       else if (p%solver%f_action == 'explicit') then
         reason = "plain TFETI: hybrid TFETI does not take &solver f_action = 'explicit'"
+      else if (p%solver%local_solver == 'dense') then
+        reason = "plain TFETI: hybrid TFETI does not take &solver local_solver = 'dense'"
       else if (any(nel > auto_max_nel)) then
         reason = 'plain TFETI: subdomains of more than 2 elements in a direction (clusters pay for H/h <= 2)'
       else if (product(int(nsub, i8)) < int(auto_min_subdomains, i8)*maxval(nel)**3) then

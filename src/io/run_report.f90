@@ -168,6 +168,7 @@ contains
     call js%add('f_action', trim(merge('explicit', 'implicit', op%f_explicit())))
     ! the ordering of the subdomain factorizations (&solver local_ordering = 'auto' resolved)
     call js%add('local_ordering', trim(op%local_ordering()))
+    call js%add('local_solver', trim(op%local_solver()))
     ! f_action = 'auto''s deferred build: the F actions made before it (-1: none made or pending)
     call js%add('f_explicit_after', merge(op%f_explicit_after(), -1_i8, op%f_explicit()))
     call js%add('f_shared', op%f_shared())

@@ -1,0 +1,286 @@
+!> K^+ of small subdomains by dense linear algebra, split along the dofs
+!> that B touches (`&solver local_solver = 'dense'`; docs/THEORY.md "Dense
+!> local solver").
+!>
+!> For each subdomain, K_reg = K + rho_f Q_F Q_F^T exactly as kplus builds it
+!> (kplus::regularized_system) is split into the dofs D that B touches (the
+!> interface, Dirichlet and contact dofs) and the others I:
+!>
+!>   K_reg = [K_II K_ID; K_DI K_DD] = U^T U,  U = [U_I W; 0 U_S],
+!>   U_I^T U_I = K_II,  W = U_I^{-T} K_ID,
+!>   U_S^T U_S = S = K_DD - W^T W   (the Schur complement on D, SPD),
+!>
+!> one dense Cholesky factorization (LAPACK dpotrf) of K_reg with the
+!> interior dofs ordered first gives all three blocks; U_S is kept as a packed
+!> upper triangle. Then
+!> - the F action needs (K_reg^{-1})_DD = S^{-1} only: t <- U_S^{-1} U_S^{-T} t
+!>   (two packed triangular solves, `solve_touched`), reading n_d (n_d+1)/2
+!>   values twice and never the interior;
+!> - a full solve K_reg u = b (the right-hand side d, the reconstruction) is
+!>   y_I = U_I^{-T} b_I, y_D = b_D - W^T y_I, u_D = S^{-1} y_D,
+!>   u_I = U_I^{-1} (y_I - W u_D).
+!> On subdomains of a few hundred dofs the fill of a sparse factor is nearly
+!> dense anyway, and one dense factorization per subdomain costs a fraction
+!> of MUMPS's per-matrix analysis and assembly of small fronts (measured in
+!> docs/RESULTS.md "Dense local solver"). Memory per subdomain:
+!> n_I^2 + n_I n_D + n_D (n_D+1)/2 values, so it is meant for small subdomains
+!> (`local_solver = 'auto'` takes it up to `params::dense_max_dofs`).
+!> Local: no communication.
+module kplus_dense
+  use kinds, only: dp, ip, i8
+  use errors, only: fatal_error
+  use subdomain, only: subdomain_t
+  use kplus, only: regularized_system
+  use local_inverse, only: local_inverse_t
+  use lapack_interfaces, only: dpotrf, dtrsv, dtpsv, dgemv
+  implicit none
+  private
+
+  type, extends(local_inverse_t), public :: kplus_dense_t
+    integer(ip) :: nblocks = 0
+    integer(ip), allocatable :: offset(:)       !< (nblocks+1) dof offsets in the concatenated vector
+    integer(ip), allocatable :: ni(:), nd(:)    !< (nblocks) interior and touched dofs
+    integer(ip), allocatable :: iptr(:), dptr(:) !< (nblocks+1) offsets into idof, ddof
+    integer(ip), allocatable :: idof(:), ddof(:) !< local dof numbers of I and D (ascending)
+    integer(i8), allocatable :: uoff(:), woff(:), soff(:) !< (nblocks+1) offsets into ui, w, us
+    real(dp), allocatable :: ui(:)              !< U_I, n_I x n_I column-major, upper triangle
+    real(dp), allocatable :: w(:)               !< W, n_I x n_D column-major
+    real(dp), allocatable :: us(:)              !< U_S, packed upper triangle
+    real(dp) :: flops = 0                       !< flops of the factorizations
+    real(dp), allocatable :: yi(:), yd(:)       !< work
+  contains
+    procedure :: init
+    procedure :: init_split
+    procedure :: solve
+    procedure :: solve_touched
+    procedure :: touched
+    procedure :: factor_bytes
+    procedure :: factor_flops
+    procedure :: free
+  end type kplus_dense_t
+
+contains
+
+  !> All dofs touched (no interior): a dense Cholesky factor of each K_reg.
+  !> `ordering` is not used (dense).
+  subroutine init(this, subs, regularization, ordering)
+    class(kplus_dense_t), intent(inout) :: this
+    type(subdomain_t), intent(in) :: subs(:)
+    real(dp), intent(in) :: regularization
+    character(len=*), intent(in) :: ordering
+    integer(ip), allocatable :: ptr(:), dofs(:)
+    integer(ip) :: s, i, k
+    if (ordering == '') continue   ! dense: no ordering
+    allocate (ptr(size(subs) + 1))
+    ptr(1) = 0
+    do s = 1, size(subs, kind=ip)
+      ptr(s + 1) = ptr(s) + subs(s)%ndof
+    end do
+    allocate (dofs(ptr(size(subs) + 1)))
+    k = 0
+    do s = 1, size(subs, kind=ip)
+      do i = 1, subs(s)%ndof
+        k = k + 1
+        dofs(k) = i
+      end do
+    end do
+    call this%init_split(subs, regularization, ptr, dofs)
+  end subroutine init
+
+  !> Factorize every subdomain's K_reg split along its touched dofs: those of
+  !> subdomain s are touched(tptr(s)+1:tptr(s+1)), ascending local dof numbers.
+  subroutine init_split(this, subs, regularization, tptr, touched)
+    class(kplus_dense_t), intent(inout) :: this
+    type(subdomain_t), intent(in) :: subs(:)
+    real(dp), intent(in) :: regularization
+    integer(ip), intent(in) :: tptr(:), touched(:)
+    integer(ip), allocatable :: irn(:), jcn(:), perm(:), pos(:)
+    real(dp), allocatable :: a(:), kd(:, :)
+    logical, allocatable :: is_d(:)
+    integer(ip) :: s, n, ni, nd, i, j, k, e, nimax, ndmax
+    integer(i8) :: o
+    integer :: info
+
+    call this%free()
+    this%nblocks = size(subs, kind=ip)
+    if (size(tptr) /= this%nblocks + 1) call fatal_error('kplus_dense%init_split: tptr must have nblocks+1 entries')
+    allocate (this%offset(this%nblocks + 1), this%ni(this%nblocks), this%nd(this%nblocks), &
+              this%iptr(this%nblocks + 1), this%dptr(this%nblocks + 1), this%uoff(this%nblocks + 1), &
+              this%woff(this%nblocks + 1), this%soff(this%nblocks + 1))
+    this%offset(1) = 0
+    this%iptr(1) = 0
+    this%dptr(1) = 0
+    this%uoff(1) = 0
+    this%woff(1) = 0
+    this%soff(1) = 0
+    do s = 1, this%nblocks
+      n = subs(s)%ndof
+      nd = tptr(s + 1) - tptr(s)
+      if (nd < 0 .or. nd > n) call fatal_error('kplus_dense%init_split: touched dofs out of range')
+      ni = n - nd
+      this%offset(s + 1) = this%offset(s) + n
+      this%ni(s) = ni
+      this%nd(s) = nd
+      this%iptr(s + 1) = this%iptr(s) + ni
+      this%dptr(s + 1) = this%dptr(s) + nd
+      this%uoff(s + 1) = this%uoff(s) + int(ni, i8)*ni
+      this%woff(s + 1) = this%woff(s) + int(ni, i8)*nd
+      this%soff(s + 1) = this%soff(s) + int(nd, i8)*(nd + 1)/2
+    end do
+    allocate (this%idof(this%iptr(this%nblocks + 1)), this%ddof(this%dptr(this%nblocks + 1)), &
+              this%ui(this%uoff(this%nblocks + 1)), this%w(this%woff(this%nblocks + 1)), &
+              this%us(this%soff(this%nblocks + 1)))
+    nimax = maxval([1_ip, this%ni])
+    ndmax = maxval([1_ip, this%nd])
+    allocate (this%yi(nimax), this%yd(ndmax))
+
+    do s = 1, this%nblocks
+      n = subs(s)%ndof
+      ni = this%ni(s)
+      nd = this%nd(s)
+      ! the split: position of every dof in I (1..ni) or D (1..nd)
+      if (allocated(is_d)) deallocate (is_d, pos)
+      allocate (is_d(n), pos(n))
+      is_d = .false.
+      do k = 1, nd
+        i = touched(tptr(s) + k)
+        if (i < 1 .or. i > n) call fatal_error('kplus_dense%init_split: touched dof out of range')
+        if (is_d(i)) call fatal_error('kplus_dense%init_split: a touched dof is listed twice')
+        if (k > 1) then
+          if (i < touched(tptr(s) + k - 1)) call fatal_error('kplus_dense%init_split: touched dofs must ascend')
+        end if
+        is_d(i) = .true.
+        pos(i) = k
+        this%ddof(this%dptr(s) + k) = i
+      end do
+      k = 0
+      do i = 1, n
+        if (is_d(i)) cycle
+        k = k + 1
+        pos(i) = k
+        this%idof(this%iptr(s) + k) = i
+      end do
+      ! K_reg, dense, in the order (I, D): its Cholesky factor is then
+      ! [U_I W; 0 U_S] (one dpotrf for all three blocks)
+      call regularized_system(subs(s), regularization, 'amd', irn, jcn, a, perm)
+      do k = 1, n
+        if (is_d(k)) pos(k) = pos(k) + ni
+      end do
+      if (allocated(kd)) then
+        if (size(kd, 1) < n) deallocate (kd)
+      end if
+      if (.not. allocated(kd)) allocate (kd(n, n))
+      kd(1:n, 1:n) = 0
+      do e = 1, size(a)
+        i = min(pos(irn(e)), pos(jcn(e)))
+        j = max(pos(irn(e)), pos(jcn(e)))
+        kd(i, j) = kd(i, j) + a(e)
+      end do
+      call dpotrf('U', n, kd, size(kd, 1), info)
+      if (info /= 0) call fatal_error('kplus_dense: K_reg is not positive definite (LAPACK dpotrf failed)')
+      o = this%uoff(s)
+      do j = 1, ni
+        this%ui(o + int(j - 1, i8)*ni + 1:o + int(j, i8)*ni) = kd(1:ni, j)
+      end do
+      o = this%woff(s)
+      do j = 1, nd
+        this%w(o + int(j - 1, i8)*ni + 1:o + int(j, i8)*ni) = kd(1:ni, ni + j)
+      end do
+      o = this%soff(s)
+      do j = 1, nd
+        this%us(o + int(j, i8)*(j - 1)/2 + 1:o + int(j, i8)*(j + 1)/2) = kd(ni + 1:ni + j, ni + j)
+      end do
+      this%flops = this%flops + real(ni, dp)**3/3 + real(ni, dp)**2*nd + real(nd, dp)**2*ni + &
+                   real(nd, dp)**3/3
+    end do
+  end subroutine init_split
+
+  !> x <- K^+ x for the concatenated vector of all blocks.
+  subroutine solve(this, x)
+    class(kplus_dense_t), intent(inout) :: this
+    real(dp), intent(inout) :: x(:)
+    integer(ip) :: s, ni, nd, o, k
+    if (this%nblocks == 0) return
+    if (size(x) /= this%offset(this%nblocks + 1)) call fatal_error('kplus_dense%solve: x must have ndof entries')
+    do s = 1, this%nblocks
+      ni = this%ni(s)
+      nd = this%nd(s)
+      o = this%offset(s)
+      do k = 1, ni
+        this%yi(k) = x(o + this%idof(this%iptr(s) + k))
+      end do
+      do k = 1, nd
+        this%yd(k) = x(o + this%ddof(this%dptr(s) + k))
+      end do
+      if (ni > 0) then
+        call dtrsv('U', 'T', 'N', ni, this%ui(this%uoff(s) + 1), ni, this%yi, 1)
+        if (nd > 0) call dgemv('T', ni, nd, -1.0_dp, this%w(this%woff(s) + 1), ni, this%yi, 1, 1.0_dp, this%yd, 1)
+      end if
+      if (nd > 0) call packed_cholesky_solve(nd, this%us(this%soff(s) + 1:this%soff(s + 1)), this%yd)
+      if (ni > 0) then
+        if (nd > 0) call dgemv('N', ni, nd, -1.0_dp, this%w(this%woff(s) + 1), ni, this%yd, 1, 1.0_dp, this%yi, 1)
+        call dtrsv('U', 'N', 'N', ni, this%ui(this%uoff(s) + 1), ni, this%yi, 1)
+      end if
+      do k = 1, ni
+        x(o + this%idof(this%iptr(s) + k)) = this%yi(k)
+      end do
+      do k = 1, nd
+        x(o + this%ddof(this%dptr(s) + k)) = this%yd(k)
+      end do
+    end do
+  end subroutine solve
+
+  !> t <- S_s^{-1} t = ((K_reg^s)^{-1})_DD t for block s, t on its touched
+  !> dofs in ascending order (length n_d).
+  subroutine solve_touched(this, s, t)
+    class(kplus_dense_t), intent(in) :: this
+    integer(ip), intent(in) :: s
+    real(dp), intent(inout) :: t(:)
+    integer(ip) :: nd
+    nd = this%nd(s)
+    if (nd == 0) return
+    if (size(t) < nd) call fatal_error('kplus_dense%solve_touched: t shorter than the touched dofs')
+    call packed_cholesky_solve(nd, this%us(this%soff(s) + 1:this%soff(s + 1)), t)
+  end subroutine solve_touched
+
+  !> t(1:n) <- (U^T U)^{-1} t(1:n), U upper triangular in packed storage.
+  subroutine packed_cholesky_solve(n, up, t)
+    integer(ip), intent(in) :: n
+    real(dp), intent(in) :: up(:)
+    real(dp), intent(inout) :: t(:)
+    call dtpsv('U', 'T', 'N', n, up, t, 1)
+    call dtpsv('U', 'N', 'N', n, up, t, 1)
+  end subroutine packed_cholesky_solve
+
+  !> The packed upper triangle of U_S of block s (for the explicit inverse).
+  function touched(this, s) result(u)
+    class(kplus_dense_t), intent(in) :: this
+    integer(ip), intent(in) :: s
+    real(dp), allocatable :: u(:)
+    u = this%us(this%soff(s) + 1:this%soff(s + 1))
+  end function touched
+
+  !> Bytes of the stored factors (U_I, W, U_S).
+  integer(i8) function factor_bytes(this)
+    class(kplus_dense_t), intent(in) :: this
+    factor_bytes = 0
+    if (.not. allocated(this%ui)) return
+    factor_bytes = 8*(size(this%ui, kind=i8) + size(this%w, kind=i8) + size(this%us, kind=i8))
+  end function factor_bytes
+
+  !> Flops of the factorizations (n_I^3/3 + n_I^2 n_D + n_D^2 n_I + n_D^3/3 per block).
+  real(dp) function factor_flops(this)
+    class(kplus_dense_t), intent(in) :: this
+    factor_flops = this%flops
+  end function factor_flops
+
+  subroutine free(this)
+    class(kplus_dense_t), intent(inout) :: this
+    if (allocated(this%offset)) deallocate (this%offset, this%ni, this%nd, this%iptr, this%dptr, this%uoff, &
+                                            this%woff, this%soff)
+    if (allocated(this%idof)) deallocate (this%idof, this%ddof, this%ui, this%w, this%us)
+    if (allocated(this%yi)) deallocate (this%yi, this%yd)
+    this%nblocks = 0
+    this%flops = 0
+  end subroutine free
+end module kplus_dense
