@@ -20,7 +20,7 @@ module params
   !> local_ordering = 'auto': MUMPS's AMD up to this many dofs in the largest subdomain, METIS above
   integer(i8), parameter, public :: amd_max_dofs = 1500
   !> local_solver = 'auto': the dense split K^+ up to this many dofs in the largest subdomain
-  integer(i8), parameter, public :: dense_max_dofs = 700
+  integer(i8), parameter, public :: dense_max_dofs = 500
 
   integer, parameter :: msg_len = 1024
 
