@@ -123,6 +123,7 @@ module dual_problem
     procedure :: eq_range_coefficient
     procedure :: face_precondition
     procedure :: hessian_norm
+    procedure :: refined_norm
     procedure :: alpha_bar
     procedure :: free
   end type dual_problem_t
@@ -471,6 +472,15 @@ contains
     class(dual_problem_t), intent(in) :: self
     hessian_norm = max(self%op%norm_pfp(), self%rho)/self%scale
   end function hessian_norm
+
+  !> ||A|| with the Lanczos estimate of ||P F P|| continued to its stopping
+  !> rule (feti_t%refine_norm_pfp; set-up made its first steps only, whose
+  !> value is the scale s). Collective.
+  real(dp) function refined_norm(self)
+    class(dual_problem_t), intent(inout) :: self
+    call self%op%refine_norm_pfp()
+    refined_norm = self%hessian_norm()
+  end function refined_norm
 
   !> The rigid body amplitudes by the new formula for this form of the
   !> equality constraint, from the dual gradient g and the multiplier of the

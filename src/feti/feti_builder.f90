@@ -20,6 +20,11 @@ submodule(feti_operators) feti_builder
   use mpi_f08, only: MPI_MAX
   implicit none
 
+  !> Lanczos steps of the ||P F P|| estimate made in set-up; the rest (to its
+  !> stopping rule) when MPRGP first needs its step length, i.e. never in a
+  !> run that the polish solves alone (docs/THEORY.md "Deferred Lanczos").
+  integer(ip), parameter :: lanczos_setup_steps = 3
+
 contains
 
   module subroutine setup(this, p, comm)
@@ -182,7 +187,7 @@ contains
       this%lower = -huge(1.0_dp)
       where (this%contact) this%lower = -this%lambda_tilde
     end associate
-    call estimate_norm_pfp(this, p%solver%power_iterations)
+    call estimate_norm_pfp(this, p%solver%power_iterations, lanczos_setup_steps)
     call timer_stop('dual setup')
     call memory_mark('dual setup')
 
@@ -316,49 +321,96 @@ contains
   !> orthogonality only repeats converged Ritz values, it does not move them
   !> above lambda_max. The estimate scales the dual problem and sets the MPRGP
   !> step 1.9/||A||, which tolerates an underestimate of 5%.
-  subroutine estimate_norm_pfp(this, max_iterations)
+  !> Deferred (issue 14, session 14): set-up makes `steps` (lanczos_setup_steps)
+  !> of them, whose theta (a lower bound) scales the dual problem; the process
+  !> is kept and continued to the stopping rule by refine_norm_pfp when MPRGP
+  !> first needs its step length (dual_problem%refined_norm).
+  subroutine estimate_norm_pfp(this, max_iterations, steps)
     class(feti_t), intent(inout) :: this
     integer(ip), intent(in) :: max_iterations
+    !> steps to make now (at most; fewer when the stopping rule holds)
+    integer(ip), intent(in) :: steps
+    real(dp), allocatable :: z(:)
+    real(dp) :: nrm
+    allocate (z(this%b%n_own()))
+    if (allocated(this%lz_v)) deallocate (this%lz_v, this%lz_vold, this%lz_alpha, this%lz_beta)
+    allocate (this%lz_v(this%b%n_own()), this%lz_vold(this%b%n_own()))
+    allocate (this%lz_alpha(max_iterations), this%lz_beta(max_iterations))
+    this%lz_max = max_iterations
+    this%lz_steps = 0
+    this%lz_done = .true.
+    this%pfp_norm = 0
+    call this%keyed_random(7, z)
+    call this%project(z, this%lz_v)
+    nrm = this%norm(this%lz_v)
+    if (nrm == 0) return
+    this%lz_v = this%lz_v/nrm
+    this%lz_vold = 0
+    this%lz_beta = 0
+    this%lz_previous = 0
+    this%lz_done = .false.
+    call lanczos_steps(this, steps)
+  end subroutine estimate_norm_pfp
+
+  module subroutine refine_norm_pfp(this)
+    class(feti_t), intent(inout) :: this
+    if (this%lz_done) return
+    call lanczos_steps(this, this%lz_max)
+  end subroutine refine_norm_pfp
+
+  !> Up to `steps` more steps of the Lanczos process of estimate_norm_pfp
+  !> (state in feti_t%lz_*), fewer when it stops (lz_done); pfp_norm = the
+  !> largest Ritz value so far. Collective.
+  subroutine lanczos_steps(this, steps)
+    class(feti_t), intent(inout) :: this
+    integer(ip), intent(in) :: steps
     !> the relative change of theta at which the Lanczos process stops
     real(dp), parameter :: lanczos_change = 1.0e-2_dp
-    real(dp), allocatable :: v(:), vold(:), w(:), z(:), alpha(:), beta(:)
-    real(dp) :: previous, nrm, lo, hi, c
-    integer(ip) :: it
-    character(len=100) :: line
-    allocate (v(this%b%n_own()), vold(this%b%n_own()), w(this%b%n_own()), z(this%b%n_own()))
-    allocate (alpha(max_iterations), beta(max_iterations))
-    call this%keyed_random(7, z)
-    call this%project(z, v)
-    nrm = this%norm(v)
-    this%pfp_norm = 0
-    if (nrm == 0) return
-    v = v/nrm
-    vold = 0
-    beta = 0
-    previous = 0
-    do it = 1, max_iterations
-      call this%apply_f(v, z)
-      call this%project(z, w)            ! w = P F P v, since P v = v
-      alpha(it) = this%dot(v, w)
-      w = w - alpha(it)*v
-      if (it > 1) w = w - beta(it - 1)*vold
-      c = this%dot(v, w)                 ! one local reorthogonalization against v
-      w = w - c*v
-      alpha(it) = alpha(it) + c
-      call tridiagonal_extremes(alpha(1:it), beta(1:it - 1), lo, hi)
-      this%pfp_norm = max(hi, this%pfp_norm)
-      if (it > 1 .and. abs(hi - previous) <= lanczos_change*hi) exit
-      previous = hi
-      nrm = this%norm(w)
-      if (nrm <= 1.0e-14_dp*hi) exit     ! an invariant subspace: theta is exact
-      beta(it) = nrm
-      vold = v
-      v = w/nrm
+    real(dp), allocatable :: w(:), z(:)
+    real(dp) :: nrm, lo, hi, c
+    integer(ip) :: it, last
+    character(len=120) :: line
+    allocate (w(this%b%n_own()), z(this%b%n_own()))
+    last = min(this%lz_max, this%lz_steps + steps)
+    do while (.not. this%lz_done .and. this%lz_steps < last)
+      it = this%lz_steps + 1
+      this%lz_steps = it
+      associate (v => this%lz_v, vold => this%lz_vold, alpha => this%lz_alpha, beta => this%lz_beta)
+        call this%apply_f(v, z)
+        call this%project(z, w)            ! w = P F P v, since P v = v
+        alpha(it) = this%dot(v, w)
+        w = w - alpha(it)*v
+        if (it > 1) w = w - beta(it - 1)*vold
+        c = this%dot(v, w)                 ! one local reorthogonalization against v
+        w = w - c*v
+        alpha(it) = alpha(it) + c
+        call tridiagonal_extremes(alpha(1:it), beta(1:it - 1), lo, hi)
+        this%pfp_norm = max(hi, this%pfp_norm)
+        if (it > 1 .and. abs(hi - this%lz_previous) <= lanczos_change*hi) then
+          this%lz_done = .true.
+        else
+          this%lz_previous = hi
+          nrm = this%norm(w)
+          if (nrm <= 1.0e-14_dp*hi) then  ! an invariant subspace: theta is exact
+            this%lz_done = .true.
+          else
+            beta(it) = nrm
+            vold = v
+            v = w/nrm
+          end if
+        end if
+      end associate
+      if (this%lz_steps >= this%lz_max) this%lz_done = .true.
     end do
-    write (line, '(a,es12.5,a,i0,a)') '||P F P|| ~ ', this%pfp_norm, ' (Lanczos, ', min(it, max_iterations), &
-      ' iterations)'
+    if (this%lz_done) then
+      write (line, '(a,es12.5,a,i0,a)') '||P F P|| ~ ', this%pfp_norm, ' (Lanczos, ', this%lz_steps, ' iterations)'
+      deallocate (this%lz_v, this%lz_vold, this%lz_alpha, this%lz_beta)
+    else
+      write (line, '(a,es12.5,a,i0,a)') '||P F P|| >= ', this%pfp_norm, ' (Lanczos, ', this%lz_steps, &
+        ' iterations; continued when MPRGP first needs its step length)'
+    end if
     call log_message(line)
-  end subroutine estimate_norm_pfp
+  end subroutine lanczos_steps
 
   !> this%dirichlet_holds: the Dirichlet rows alone fix every rigid body
   !> motion of the body. With r_i the values of the 6 rigid body motions at

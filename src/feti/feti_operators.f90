@@ -57,6 +57,12 @@ module feti_operators
     logical, allocatable :: contact(:)           !< (n_own) the row is a contact row
     real(dp), allocatable :: e(:)                !< (6*nlocal) R^T f
     real(dp) :: pfp_norm = 0                     !< estimate of ||P F P||
+    !> the Lanczos process of the estimate, kept for its continuation
+    !> (refine_norm_pfp): the last two basis vectors, T's coefficients, steps made
+    real(dp), allocatable :: lz_v(:), lz_vold(:), lz_alpha(:), lz_beta(:)
+    real(dp) :: lz_previous = 0
+    integer(ip) :: lz_steps = 0, lz_max = 0
+    logical :: lz_done = .true.                  !< converged (or stopped): nothing to refine
     !> the Dirichlet rows alone fix every rigid body motion of the body (setup, dirichlet_rigid_test)
     logical :: dirichlet_holds = .false.
     real(dp), allocatable :: xall(:)             !< work: concatenated primal vector
@@ -117,6 +123,8 @@ module feti_operators
     procedure :: row_units
     procedure :: largest_copy_spread
     procedure :: norm_pfp
+    procedure :: refine_norm_pfp
+    procedure :: norm_pfp_refined
     procedure :: f_applications
     procedure :: f_explicit
     procedure :: f_explicit_pending
@@ -143,6 +151,13 @@ module feti_operators
       type(params_t), intent(in) :: p
       type(MPI_Comm), intent(in) :: comm
     end subroutine setup
+    !> Continue the Lanczos estimate of ||P F P|| that set-up began (its
+    !> first steps scale the dual problem) until its stopping rule holds:
+    !> made when MPRGP first needs its step length (submodule feti_builder).
+    !> Nothing when it has converged already. Collective.
+    module subroutine refine_norm_pfp(this)
+      class(feti_t), intent(inout) :: this
+    end subroutine refine_norm_pfp
   end interface
 
 contains
@@ -493,10 +508,18 @@ contains
     largest_copy_spread = this%b%largest_copy_spread(u)
   end function largest_copy_spread
 
+  !> The current estimate of ||P F P|| (a lower bound; refine_norm_pfp
+  !> raises it to the converged Lanczos value).
   real(dp) function norm_pfp(this)
     class(feti_t), intent(in) :: this
     norm_pfp = this%pfp_norm
   end function norm_pfp
+
+  !> True when the Lanczos estimate has met its stopping rule.
+  logical function norm_pfp_refined(this)
+    class(feti_t), intent(in) :: this
+    norm_pfp_refined = this%lz_done
+  end function norm_pfp_refined
 
   integer(i8) function f_applications(this)
     class(feti_t), intent(in) :: this
@@ -609,6 +632,9 @@ contains
     if (allocated(this%xall)) deallocate (this%xall)
     this%n_local_subs = 0
     this%pfp_norm = 0
+    if (allocated(this%lz_v)) deallocate (this%lz_v, this%lz_vold, this%lz_alpha, this%lz_beta)
+    this%lz_steps = 0
+    this%lz_done = .true.
     this%f_build_at = 0
     this%f_built_after = -1
   end subroutine free

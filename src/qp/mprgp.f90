@@ -152,6 +152,7 @@ module mprgp
     integer(ip) :: n_proportioning = 0         !< proportioning steps
     integer(ip) :: n_expansion_fallback = 0    !< 'optimal' expansions redone with alpha_bar
     integer(ip) :: n_norm_updates = 0          !< times the last call raised a_norm to a Rayleigh quotient
+    logical :: norm_refined = .false.          !< the problem's refined_norm was asked (once after init)
     real(dp) :: best_gp_norm = 0               !< smallest ||g^P|| of the last call
     integer(ip) :: n_best = 0                  !< iteration of the last call at which it was reached
     integer(ip) :: n_preconditioner = 0        !< preconditioner applications of the last call
@@ -216,6 +217,7 @@ contains
     if (self%expansion /= 'fixed' .and. self%expansion /= 'optimal') &
       call fatal_error("mprgp: expansion must be 'fixed' or 'optimal', got '"//trim(self%expansion)//"'")
     self%alpha_bar = self%alpha_scale/self%a_norm
+    self%norm_refined = .false.
   end subroutine mprgp_init
 
   subroutine mprgp_free(self)
@@ -300,7 +302,7 @@ contains
     class(mprgp_stop_t), intent(inout) :: stop_rule
     integer(ip), intent(in) :: max_hessian
     logical, intent(in) :: gradient_given
-    real(dp) :: stats(4), gp, alpha_f, alpha_cg, pap
+    real(dp) :: stats(4), gp, alpha_f, alpha_cg, pap, a_refined
     logical :: stop, restart, conjugate_pending
     integer(ip) :: n
 
@@ -361,6 +363,17 @@ contains
         exit
       end if
 
+      if (.not. self%norm_refined) then
+        ! the first step of this MPRGP: the problem's better ||A|| (deferred
+        ! Lanczos, dual_problem%refined_norm) before alpha_bar is used
+        self%norm_refined = .true.
+        a_refined = problem%refined_norm()
+        if (a_refined > self%a_norm) then
+          self%a_norm = a_refined
+          self%alpha_bar = self%alpha_scale/self%a_norm
+          call split_stats(self, problem, x, g, stats)
+        end if
+      end if
       if (stats(2) <= self%gamma**2*stats(3)) then
         ! proportional iterate: try a CG step along p (a new run: p = phi, or z)
         if (restart) then

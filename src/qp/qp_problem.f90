@@ -138,6 +138,7 @@ module qp_problem
     procedure :: track_reset => default_track
     procedure :: eq_measure => default_eq_measure
     procedure :: has_preconditioner => default_has_preconditioner
+    procedure :: refined_norm => default_refined_norm
     procedure :: precondition => default_precondition
     procedure :: watches_condition => default_watches_condition
     procedure :: condition_estimate => default_condition_estimate
@@ -292,6 +293,16 @@ contains
     real(dp), intent(in) :: cnorm
     default_eq_measure = cnorm
   end function default_eq_measure
+
+  !> ||A|| from an estimate made more accurate now, for MPRGP's step length
+  !> when it is first needed (a problem that defers its norm estimate, as
+  !> dual_problem does, overrides it); 0: nothing better than the norm given
+  !> at MPRGP's init. Collective in the overrides.
+  real(dp) function default_refined_norm(self)
+    class(qp_problem_t), intent(inout) :: self
+    default_refined_norm = 0
+    if (self%n < 0) default_refined_norm = -1   ! never: keeps self referenced
+  end function default_refined_norm
 
   !> False: no preconditioner (MPRGP's CG steps use the free gradient).
   !> Local, no communication.

@@ -54,7 +54,12 @@ def run(args, name, extra_env, run_case_args):
     p = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=args.timeout)
     print(p.stdout[-3000:] + p.stderr[-2000:])
     check(p.returncode == 0, "%s: run_case.py checks pass" % name)
-    return workdir, p.stdout
+    # the program's whole log (run_case.py prints only its tail; the BLAS line is near the top)
+    try:
+        with open(os.path.join(workdir, "log.txt")) as f:
+            return workdir, f.read()
+    except OSError:
+        return workdir, p.stdout
 
 
 def blas_of(workdir, name):

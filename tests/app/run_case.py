@@ -269,6 +269,10 @@ def main():
     print("running:", " ".join(cmd))
     run = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout)
     out = run.stdout + run.stderr
+    # the whole log in the work folder (what a wrapper checks), its tail here
+    os.makedirs(args.workdir, exist_ok=True)
+    with open(os.path.join(args.workdir, "log.txt"), "w") as f:
+        f.write(out)
     print(out[-6000:])
     check(run.returncode == args.expect_exit, "exit status %d (expected %d)" % (run.returncode, args.expect_exit))
     if args.expect_message:
