@@ -233,7 +233,17 @@ contains
       if (.not. switch_kappa > 1) call fatal_error("dual_problem: switch_kappa must be > 1")
       self%switch_kappa = switch_kappa
       self%prec_weights = weights
-      call self%op%init_preconditioner(self%prec, 'lumped', weights)
+      if (self%op%dirichlet_from_factors()) then
+        ! the dense local solver's factors give S_s at no set-up cost and
+        ! each application costs what a lumped one does: 'dirichlet' at once
+        ! (recorded as a switch at 0 products with estimate 0)
+        call self%op%init_preconditioner(self%prec, 'dirichlet', weights)
+        self%switch_at = 0
+        call log_message("preconditioner 'auto': dirichlet from the start (S_s from the dense local solver's "// &
+                         "factors: no set-up, an application costs about what a lumped one does)")
+      else
+        call self%op%init_preconditioner(self%prec, 'lumped', weights)
+      end if
     else
       call self%op%init_preconditioner(self%prec, kind, weights)
     end if

@@ -5,7 +5,7 @@ module lapack_interfaces
   use kinds, only: dp
   implicit none
   private
-  public :: dpotrf, dpotri, dsyev, dsymv, dspmv, dgemv, dgemm, dtrsm, dtrsv, dsyrk, dtpsv, dpptri
+  public :: dpotrf, dpotri, dsyev, dsymv, dspmv, dgemv, dgemm, dtrsm, dtrsv, dsyrk, dtpsv, dpptri, dtpmv
 
   interface
     !> Cholesky factor of a symmetric positive definite matrix.
@@ -98,6 +98,14 @@ module lapack_interfaces
       real(dp), intent(in) :: ap(*)
       real(dp), intent(inout) :: x(*)
     end subroutine dtpsv
+    !> x <- op(A) x, A triangular in packed storage.
+    subroutine dtpmv(uplo, trans, diag, n, ap, x, incx)
+      import :: dp
+      character(len=1), intent(in) :: uplo, trans, diag
+      integer, intent(in) :: n, incx
+      real(dp), intent(in) :: ap(*)
+      real(dp), intent(inout) :: x(*)
+    end subroutine dtpmv
     !> Inverse of a symmetric positive definite matrix from its packed
     !> Cholesky factor (dpptrf's, or dpotrf's triangle packed).
     subroutine dpptri(uplo, n, ap, info)

@@ -58,6 +58,7 @@ module dual_preconditioner
   use lapack_interfaces, only: dpotrf, dtrsm
   use sorting, only: sort_unique
   use subdomain_classes, only: subdomain_classes_t
+  use f_operator, only: f_operator_t
   use class_operator, only: class_operator_t
   use csr_matrix, only: csr_t
   implicit none
@@ -75,6 +76,9 @@ module dual_preconditioner
     integer(i8) :: shared_bytes = 0             !< the dense S_r and W ('dirichlet' per class)
     real(dp) :: setup_flops = 0                 !< MUMPS eliminations and LAPACK of the shared setup
     type(class_operator_t) :: shared_op
+    !> 'dirichlet' with the dense local solver: S_s from its factors (f_operator%apply_dense_schur)
+    type(f_operator_t), pointer :: fop => null()
+    real(dp), allocatable :: inv_w2(:)          !< 1/w_s^2 (dense path)
     integer(i8) :: applications = 0
     !> D of the module: d_r per owned row (sqrt(n_r) on contact rows, 1 elsewhere)
     real(dp), allocatable :: d(:), dx(:)
@@ -87,6 +91,7 @@ module dual_preconditioner
     procedure :: factor_bytes
     procedure :: setup_flop_count
     procedure :: is_shared
+    procedure :: is_dense
     procedure :: free
   end type dual_preconditioner_t
 
@@ -96,13 +101,14 @@ contains
   !> outlive the preconditioner; `weights(ls)` = w_s of local subdomain ls.
   !> `classes` (optional): classes of congruent subdomains of `subs`; when
   !> they are shared (subdomain_classes_t%shared), A_s is applied per class.
-  subroutine init(this, variant, b, subs, weights, classes)
+  subroutine init(this, variant, b, subs, weights, classes, dense)
     class(dual_preconditioner_t), intent(inout) :: this
     character(len=*), intent(in) :: variant
     type(b_operator_t), intent(inout), target :: b
     type(subdomain_t), intent(in), target :: subs(:)
     real(dp), intent(in) :: weights(:)
     type(subdomain_classes_t), intent(in), optional :: classes
+    type(f_operator_t), intent(in), target, optional :: dense
     type(constraints_t), pointer :: con
     logical, allocatable :: on_interface(:)
     integer(ip) :: ls, e, r(2)
@@ -124,6 +130,12 @@ contains
         if (variant == 'dirichlet') call init_shared_dirichlet(this, b, subs, classes)
         return
       end if
+    end if
+    if (variant == 'dirichlet' .and. present(dense)) then
+      ! S_s from the dense local solver's factors: nothing to set up
+      this%fop => dense
+      this%inv_w2 = this%inv_w**2
+      return
     end if
     if (variant == 'dirichlet') then
       ! the interface: every dof with an entry of B (gluing, Dirichlet, contact)
@@ -285,6 +297,13 @@ contains
       call timer_stop('preconditioner')
       return
     end if
+    if (associated(this%fop)) then
+      call this%fop%apply_dense_schur(this%b, this%dx, y, this%inv_w2)
+      y(1:size(this%d)) = this%d*y(1:size(this%d))
+      this%applications = this%applications + 1
+      call timer_stop('preconditioner')
+      return
+    end if
     this%xall = 0
     call this%b%add_transpose(this%dx, 1.0_dp, this%xall)
     do ls = 1, size(this%subs, kind=ip)
@@ -373,6 +392,12 @@ contains
   end function setup_flop_count
 
   !> True when A_s is applied per class of congruent subdomains.
+  !> True when 'dirichlet' takes S_s from the dense local solver's factors.
+  logical function is_dense(this)
+    class(dual_preconditioner_t), intent(in) :: this
+    is_dense = associated(this%fop)
+  end function is_dense
+
   logical function is_shared(this)
     class(dual_preconditioner_t), intent(in) :: this
     is_shared = this%shared
@@ -388,6 +413,8 @@ contains
     if (allocated(this%inv_w)) deallocate (this%inv_w)
     if (allocated(this%xall)) deallocate (this%xall, this%yall)
     if (allocated(this%d)) deallocate (this%d, this%dx)
+    if (allocated(this%inv_w2)) deallocate (this%inv_w2)
+    this%fop => null()
     this%b => null()
     this%subs => null()
     this%kind_name = 'none'

@@ -72,6 +72,8 @@ module f_operator
     procedure :: build_explicit
     procedure :: build_dense
     procedure :: is_dense
+    procedure :: dense_schur_ready
+    procedure :: apply_dense_schur
     procedure :: is_explicit
     procedure :: explicit_bytes
     procedure :: touched_dofs
@@ -294,6 +296,49 @@ contains
     class(f_operator_t), intent(in) :: this
     is_dense = this%dense .or. this%dense_pending
   end function is_dense
+
+  !> True when the dense solver is built and gives the Schur complement of
+  !> K (not K_reg) on the touched dofs of every local subdomain (its fixing
+  !> nodes all touched; kplus_dense%schur_product). Local.
+  logical function dense_schur_ready(this)
+    class(f_operator_t), intent(in) :: this
+    dense_schur_ready = .false.
+    if (.not. this%dense) return
+    select type (k => this%kinv)
+    type is (kplus_dense_t)
+      dense_schur_ready = k%all_schur_ok()
+    end select
+  end function dense_schur_ready
+
+  !> y = sum_s a_s B^_s S_s B^_s^T x, S_s the Schur complement of K_s on the
+  !> dofs B^s touches (from the dense solver's factors, dense_schur_ready):
+  !> the Dirichlet preconditioner's local part with a_s = 1/w_s^2
+  !> (dual_preconditioner). Gather and scatter of the rows as for F.
+  subroutine apply_dense_schur(this, b, x, y, a)
+    class(f_operator_t), intent(inout) :: this
+    type(b_operator_t), intent(inout) :: b
+    real(dp), intent(in) :: x(:), a(:)
+    real(dp), intent(inout) :: y(:)
+    integer(ip) :: s, e, n
+    call b%gather_rows(x, this%wloc)
+    this%wloc2 = 0
+    select type (k => this%kinv)
+    type is (kplus_dense_t)
+      do s = 1, this%nsub
+        n = this%nd(s)
+        if (n == 0) cycle
+        this%t(1:n) = 0
+        do e = this%eoff(s) + 1, this%eoff(s + 1)
+          this%t(this%edof(e)) = this%t(this%edof(e)) + this%eval(e)*this%wloc(this%erow(e))
+        end do
+        call k%schur_product(s, this%t(1:n), this%u(1:n))
+        do e = this%eoff(s) + 1, this%eoff(s + 1)
+          this%wloc2(this%erow(e)) = this%wloc2(this%erow(e)) + a(s)*this%eval(e)*this%u(this%edof(e))
+        end do
+      end do
+    end select
+    call b%scatter_rows(this%wloc2, y)
+  end subroutine apply_dense_schur
 
   !> y = sum_s B^_s S_s^{-1} B^_s^T x with the packed Cholesky factors of the
   !> Schur complements S_s (two triangular solves per subdomain).

@@ -12,7 +12,7 @@ submodule(feti_operators) feti_builder
   use clusters, only: is_hybrid, unit_params, build_cluster
   use assembly, only: assemble_subdomain
   use coarse_problem, only: choose_coarse_ranks
-  use mpi_f08, only: MPI_Comm_size, MPI_IN_PLACE, MPI_INTEGER, MPI_MIN
+  use mpi_f08, only: MPI_Comm_size
   use errors, only: collective_error, exit_input_error
   use ritz_values, only: tridiagonal_extremes
   use constraints, only: row_dirichlet

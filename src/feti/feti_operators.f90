@@ -26,7 +26,7 @@ module feti_operators
   use coarse_problem, only: coarse_problem_t
   use orthonormal_coarse, only: orthonormal_coarse_t
   use dual_preconditioner, only: dual_preconditioner_t
-  use mpi_f08, only: MPI_Comm, MPI_Allreduce, MPI_SUM
+  use mpi_f08, only: MPI_Comm, MPI_Allreduce, MPI_SUM, MPI_MIN, MPI_IN_PLACE, MPI_INTEGER
   implicit none
   private
 
@@ -131,6 +131,7 @@ module feti_operators
     procedure :: f_explicit_after
     procedure :: local_ordering
     procedure :: local_solver
+    procedure :: dirichlet_from_factors
     procedure :: f_shared
     procedure :: f_classes
     procedure :: f_local_operator
@@ -351,10 +352,28 @@ contains
     real(dp), intent(in) :: weights(:)
     if (this%f%is_shared()) then
       call prec%init(kind, this%b, this%subs, weights, this%f%classes_found())
+      return
+    end if
+    ! 'dirichlet' from the dense local solver's factors when every rank has them
+    ! (the same exchanges on every rank)
+    if (kind == 'dirichlet' .and. this%dirichlet_from_factors()) then
+      call prec%init(kind, this%b, this%subs, weights, dense=this%f)
     else
       call prec%init(kind, this%b, this%subs, weights)
     end if
   end subroutine init_preconditioner
+
+  !> True when the Dirichlet preconditioner can take S_s of every subdomain
+  !> from the dense local solver's factors (no set-up, one pair of packed
+  !> triangular products per subdomain and application), on every rank.
+  !> Collective.
+  logical function dirichlet_from_factors(this)
+    class(feti_t), intent(in) :: this
+    integer :: ready, ierr
+    ready = merge(1, 0, this%f%dense_schur_ready())
+    call MPI_Allreduce(MPI_IN_PLACE, ready, 1, MPI_INTEGER, MPI_MIN, this%communicator, ierr)
+    dirichlet_from_factors = ready == 1
+  end function dirichlet_from_factors
 
   ! ---- accessors ----
 

@@ -148,12 +148,20 @@ contains
   !> fixing nodes chosen as in `init`, and (ordering 'metis') the METIS pivot
   !> order perm(dof) = position; perm is not allocated for 'amd'. Used by
   !> kplus_block to factorize many subdomains as one block-diagonal matrix.
-  subroutine regularized_system(sub, regularization, ordering, irn, jcn, a, perm)
+  !> `allowed` (optional, per node): choose the fixing nodes among these
+  !> when they fix the rigid body motions (else among all nodes);
+  !> `fixing_dofs_out`, `fixing_block_out` (optional): the dofs of the fixing
+  !> nodes (ascending) and the block rho_f Q_F Q_F^T added on them.
+  subroutine regularized_system(sub, regularization, ordering, irn, jcn, a, perm, allowed, fixing_dofs_out, &
+                                fixing_block_out)
     type(subdomain_t), intent(in) :: sub
     real(dp), intent(in) :: regularization
     character(len=*), intent(in) :: ordering
     integer(ip), allocatable, intent(out) :: irn(:), jcn(:), perm(:)
     real(dp), allocatable, intent(out) :: a(:)
+    logical, intent(in), optional :: allowed(:)
+    integer(ip), allocatable, intent(out), optional :: fixing_dofs_out(:)
+    real(dp), allocatable, intent(out), optional :: fixing_block_out(:, :)
     integer(ip), allocatable :: nodes(:), fixing_dofs(:)
     real(dp), allocatable :: block(:, :)
     real(dp) :: ratio, rho
@@ -161,10 +169,12 @@ contains
     if (.not. (regularization > 0)) call fatal_error('kplus: the regularization must be > 0')
     rho = regularization*mean_diagonal(sub)
     if (.not. (rho > 0)) call fatal_error('kplus: K has no positive diagonal')
-    call choose_fixing_nodes(sub, nodes, ratio)
+    call choose_fixing_nodes(sub, nodes, ratio, allowed)
     call fixing_block(sub, nodes, rho, fixing_dofs, block)
     call upper_coo(sub, fixing_dofs, block, irn, jcn, a)
     if (ordering == 'metis') call node_nested_dissection(sub, nodes, perm)
+    if (present(fixing_dofs_out)) fixing_dofs_out = fixing_dofs
+    if (present(fixing_block_out)) fixing_block_out = block
   end subroutine regularized_system
 
   ! ---------------------------------------------------------------- private
@@ -198,81 +208,110 @@ contains
   !> farthest from their plane; then, while R_F^T R_F is poorly conditioned,
   !> the node farthest from all chosen ones. Works for any shape (METIS-cut
   !> subdomains too): only distances between nodes are used.
-  subroutine choose_fixing_nodes(sub, nodes, ratio)
+  subroutine choose_fixing_nodes(sub, nodes, ratio, allowed)
     type(subdomain_t), intent(in) :: sub
     integer(ip), allocatable, intent(out) :: nodes(:)
     real(dp), intent(out) :: ratio
-    integer(ip) :: chosen(max_fixing_nodes), nf, a, best, limit
-    real(dp) :: c(3), x(3), normal(3), score, best_score, diameter
+    logical, intent(in), optional :: allowed(:)
+    logical, allocatable :: ok(:)
     real(dp), allocatable :: mindist(:)
+    allocate (ok(sub%nnodes), mindist(sub%nnodes))
+    ok = .true.
+    if (present(allowed)) then
+      if (size(allowed) /= sub%nnodes) call fatal_error('kplus: the allowed fixing nodes need one flag per node')
+      if (any(allowed)) then
+        ok = allowed
+        call choose_among(nodes, ratio)
+        if (ratio >= gram_ratio_min) return
+      end if
+      ok = .true.
+    end if
+    call choose_among(nodes, ratio)
+    if (ratio < gram_ratio_min) then
+      block
+        character(len=160) :: msg
+        write (msg, '(a,i0,a,es9.2)') 'kplus: no set of fixing nodes of subdomain ', sub%id, &
+          ' fixes its rigid body motions; eigenvalue ratio of R_F^T R_F ', ratio
+        call fatal_error(trim(msg))
+      end block
+    end if
 
-    associate (xyz => sub%coords, nn => sub%nnodes)
-      limit = min(max_fixing_nodes, nn)
-      c = sum(xyz, dim=2)/nn
-      chosen(1) = farthest_from(c)
-      chosen(2) = farthest_from(xyz(:, chosen(1)))
-      nf = 2
-      diameter = norm2(xyz(:, chosen(2)) - xyz(:, chosen(1)))
-      ! largest triangle with the first two
-      best = 0
-      best_score = 0
-      do a = 1, nn
-        score = norm2(cross(xyz(:, a) - xyz(:, chosen(1)), xyz(:, chosen(2)) - xyz(:, chosen(1))))
-        if (score > best_score) then
-          best_score = score
-          best = a
+  contains
+
+    !> The rule above among the nodes with ok(node) (at least one).
+    subroutine choose_among(nodes, ratio)
+      integer(ip), allocatable, intent(out) :: nodes(:)
+      real(dp), intent(out) :: ratio
+      integer(ip) :: chosen(max_fixing_nodes), nf, a, best, limit
+      real(dp) :: c(3), normal(3), score, best_score, diameter
+
+      associate (xyz => sub%coords, nn => sub%nnodes)
+        limit = min(max_fixing_nodes, count(ok, kind=ip))
+        if (all(ok)) then
+          c = sum(xyz, dim=2)/nn
+        else
+          c = 0
+          do a = 1, nn
+            if (ok(a)) c = c + xyz(:, a)
+          end do
+          c = c/count(ok)
         end if
-      end do
-      if (best > 0 .and. best_score > 1.0e-8_dp*diameter**2) then
-        nf = nf + 1
-        chosen(nf) = best
-        ! farthest from the plane of the three
-        normal = cross(xyz(:, chosen(2)) - xyz(:, chosen(1)), xyz(:, chosen(3)) - xyz(:, chosen(1)))
-        normal = normal/norm2(normal)
+        chosen(1) = farthest_from(c)
+        chosen(2) = farthest_from(xyz(:, chosen(1)))
+        nf = 2
+        diameter = norm2(xyz(:, chosen(2)) - xyz(:, chosen(1)))
+        ! largest triangle with the first two
         best = 0
         best_score = 0
         do a = 1, nn
-          score = abs(dot_product(xyz(:, a) - xyz(:, chosen(1)), normal))
+          if (.not. ok(a)) cycle
+          score = norm2(cross(xyz(:, a) - xyz(:, chosen(1)), xyz(:, chosen(2)) - xyz(:, chosen(1))))
           if (score > best_score) then
             best_score = score
             best = a
           end if
         end do
-        if (best > 0 .and. best_score > 1.0e-8_dp*diameter .and. nf < limit) then
+        if (best > 0 .and. best_score > 1.0e-8_dp*diameter**2) then
           nf = nf + 1
           chosen(nf) = best
+          ! farthest from the plane of the three
+          normal = cross(xyz(:, chosen(2)) - xyz(:, chosen(1)), xyz(:, chosen(3)) - xyz(:, chosen(1)))
+          normal = normal/norm2(normal)
+          best = 0
+          best_score = 0
+          do a = 1, nn
+            if (.not. ok(a)) cycle
+            score = abs(dot_product(xyz(:, a) - xyz(:, chosen(1)), normal))
+            if (score > best_score) then
+              best_score = score
+              best = a
+            end if
+          end do
+          if (best > 0 .and. best_score > 1.0e-8_dp*diameter .and. nf < limit) then
+            nf = nf + 1
+            chosen(nf) = best
+          end if
         end if
-      end if
 
-      ! more nodes while R_F^T R_F is poorly conditioned: farthest-point sampling
-      allocate (mindist(nn))
-      do a = 1, nn
-        mindist(a) = huge(1.0_dp)
-      end do
-      do a = 1, nf
-        call update_mindist(chosen(a))
-      end do
-      ratio = gram_ratio_of(sub, chosen(1:nf))
-      do while (ratio < gram_ratio_wanted .and. nf < limit)
-        best = maxloc(mindist, dim=1)
-        if (mindist(best) <= 0) exit
-        nf = nf + 1
-        chosen(nf) = best
-        call update_mindist(best)
+        ! more nodes while R_F^T R_F is poorly conditioned: farthest-point sampling
+        do a = 1, nn
+          mindist(a) = merge(huge(1.0_dp), -1.0_dp, ok(a))
+        end do
+        do a = 1, nf
+          call update_mindist(chosen(a))
+        end do
         ratio = gram_ratio_of(sub, chosen(1:nf))
-      end do
-      if (ratio < gram_ratio_min) then
-        block
-          character(len=160) :: msg
-          write (msg, '(a,i0,a,es9.2)') 'kplus: no set of fixing nodes of subdomain ', sub%id, &
-            ' fixes its rigid body motions; eigenvalue ratio of R_F^T R_F ', ratio
-          call fatal_error(trim(msg))
-        end block
-      end if
-      nodes = chosen(1:nf)
-    end associate
-
-  contains
+        do while (ratio < gram_ratio_wanted .and. nf < limit)
+          best = maxloc(mindist, dim=1)
+          if (mindist(best) <= 0) exit
+          nf = nf + 1
+          chosen(nf) = best
+          call update_mindist(best)
+          ratio = gram_ratio_of(sub, chosen(1:nf))
+        end do
+        nodes = chosen(1:nf)
+      end associate
+    end subroutine choose_among
 
     integer(ip) function farthest_from(p)
       real(dp), intent(in) :: p(3)
@@ -281,6 +320,7 @@ contains
       farthest_from = 1
       dmax = -1
       do b = 1, sub%nnodes
+        if (.not. ok(b)) cycle
         d = sum((sub%coords(:, b) - p)**2)
         if (d > dmax) then
           dmax = d
@@ -292,8 +332,10 @@ contains
     subroutine update_mindist(node)
       integer(ip), intent(in) :: node
       integer(ip) :: b
+      real(dp) :: x(3)
       x = sub%coords(:, node)
       do b = 1, sub%nnodes
+        if (mindist(b) < 0) cycle
         mindist(b) = min(mindist(b), norm2(sub%coords(:, b) - x))
       end do
     end subroutine update_mindist

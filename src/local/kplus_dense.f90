@@ -2,9 +2,11 @@
 !> that B touches (`&solver local_solver = 'dense'`; docs/THEORY.md "Dense
 !> local solver").
 !>
-!> For each subdomain, K_reg = K + rho_f Q_F Q_F^T exactly as kplus builds it
-!> (kplus::regularized_system) is split into the dofs D that B touches (the
-!> interface, Dirichlet and contact dofs) and the others I:
+!> For each subdomain, K_reg = K + rho_f Q_F Q_F^T as kplus builds it
+!> (kplus::regularized_system, the fixing nodes chosen among the nodes whose
+!> three dofs are touched when they fix the rigid body motions) is split into
+!> the dofs D that B touches (the interface, Dirichlet and contact dofs) and
+!> the others I:
 !>
 !>   K_reg = [K_II K_ID; K_DI K_DD] = U^T U,  U = [U_I W; 0 U_S],
 !>   U_I^T U_I = K_II,  W = U_I^{-T} K_ID,
@@ -25,6 +27,9 @@
 !> docs/RESULTS.md "Dense local solver"). Memory per subdomain:
 !> n_I^2 + n_I n_D + n_D (n_D+1)/2 values, so it is meant for small subdomains
 !> (`local_solver = 'auto'` takes it up to `params::dense_max_dofs`).
+!> With the fixing block inside D x D (schur_ok), S of K itself is
+!> U_S^T U_S minus that block: `schur_product`, the Dirichlet
+!> preconditioner's local operator at no set-up cost.
 !> Local: no communication.
 module kplus_dense
   use kinds, only: dp, ip, i8
@@ -32,7 +37,7 @@ module kplus_dense
   use subdomain, only: subdomain_t
   use kplus, only: regularized_system
   use local_inverse, only: local_inverse_t
-  use lapack_interfaces, only: dpotrf, dtrsv, dtpsv, dgemv
+  use lapack_interfaces, only: dpotrf, dtrsv, dtpsv, dtpmv, dgemv
   implicit none
   private
 
@@ -47,12 +52,21 @@ module kplus_dense
     real(dp), allocatable :: w(:)               !< W, n_I x n_D column-major
     real(dp), allocatable :: us(:)              !< U_S, packed upper triangle
     real(dp) :: flops = 0                       !< flops of the factorizations
+    !> the fixing block rho_f Q_F Q_F^T of each K_reg when all its dofs are
+    !> touched (schur_ok): positions in the touched numbering and the dense
+    !> block, so that S of K itself is U_S^T U_S minus it (schur_product)
+    logical, allocatable :: schur_ok(:)
+    integer(ip), allocatable :: fptr(:), fpos(:)
+    integer(i8), allocatable :: fboff(:)
+    real(dp), allocatable :: fblock(:)
     real(dp), allocatable :: yi(:), yd(:)       !< work
   contains
     procedure :: init
     procedure :: init_split
     procedure :: solve
     procedure :: solve_touched
+    procedure :: schur_product
+    procedure :: all_schur_ok
     procedure :: touched
     procedure :: factor_bytes
     procedure :: factor_flops
@@ -94,9 +108,9 @@ contains
     type(subdomain_t), intent(in) :: subs(:)
     real(dp), intent(in) :: regularization
     integer(ip), intent(in) :: tptr(:), touched(:)
-    integer(ip), allocatable :: irn(:), jcn(:), perm(:), pos(:)
-    real(dp), allocatable :: a(:), kd(:, :)
-    logical, allocatable :: is_d(:)
+    integer(ip), allocatable :: irn(:), jcn(:), perm(:), pos(:), fdofs(:)
+    real(dp), allocatable :: a(:), kd(:, :), fblk(:, :)
+    logical, allocatable :: is_d(:), allowed(:)
     integer(ip) :: s, n, ni, nd, i, j, k, e, nimax, ndmax
     integer(i8) :: o
     integer :: info
@@ -133,6 +147,10 @@ contains
     nimax = maxval([1_ip, this%ni])
     ndmax = maxval([1_ip, this%nd])
     allocate (this%yi(nimax), this%yd(ndmax))
+    allocate (this%schur_ok(this%nblocks), this%fptr(this%nblocks + 1), this%fboff(this%nblocks + 1))
+    allocate (this%fpos(0), this%fblock(0))
+    this%fptr(1) = 0
+    this%fboff(1) = 0
 
     do s = 1, this%nblocks
       n = subs(s)%ndof
@@ -162,7 +180,18 @@ contains
       end do
       ! K_reg, dense, in the order (I, D): its Cholesky factor is then
       ! [U_I W; 0 U_S] (one dpotrf for all three blocks)
-      call regularized_system(subs(s), regularization, 'amd', irn, jcn, a, perm)
+      ! fixing nodes among the nodes whose three dofs are touched, where
+      ! they fix the rigid body motions: then K_reg differs from K on D x D
+      ! only, and S of K is U_S^T U_S minus the fixing block (schur_product)
+      allowed = [(all(is_d(3*k - 2:3*k)), k=1, subs(s)%nnodes)]
+      call regularized_system(subs(s), regularization, 'amd', irn, jcn, a, perm, allowed, fdofs, fblk)
+      this%schur_ok(s) = all(is_d(fdofs))
+      if (this%schur_ok(s)) then
+        this%fpos = [this%fpos, pos(fdofs)]
+        this%fblock = [this%fblock, reshape(fblk, [size(fblk)])]
+      end if
+      this%fptr(s + 1) = size(this%fpos, kind=ip)
+      this%fboff(s + 1) = size(this%fblock, kind=i8)
       do k = 1, n
         if (is_d(k)) pos(k) = pos(k) + ni
       end do
@@ -243,6 +272,41 @@ contains
     call packed_cholesky_solve(nd, this%us(this%soff(s) + 1:this%soff(s + 1)), t)
   end subroutine solve_touched
 
+  !> u = S_s t for block s, S_s the Schur complement of K itself (not K_reg)
+  !> on the touched dofs, t and u on them in ascending order (length n_d):
+  !> S_s = U_S^T U_S - (the fixing block on its positions), valid when all
+  !> the fixing dofs are touched (schur_ok). Two packed triangular products.
+  subroutine schur_product(this, s, t, u)
+    class(kplus_dense_t), intent(in) :: this
+    integer(ip), intent(in) :: s
+    real(dp), intent(in) :: t(:)
+    real(dp), intent(inout) :: u(:)
+    integer(ip) :: nd, nf, i, j
+    integer(i8) :: o
+    nd = this%nd(s)
+    if (nd == 0) return
+    if (.not. this%schur_ok(s)) call fatal_error('kplus_dense%schur_product: a fixing node of this subdomain '// &
+                                                 'is not touched')
+    u(1:nd) = t(1:nd)
+    call dtpmv('U', 'N', 'N', nd, this%us(this%soff(s) + 1:this%soff(s + 1)), u, 1)
+    call dtpmv('U', 'T', 'N', nd, this%us(this%soff(s) + 1:this%soff(s + 1)), u, 1)
+    nf = this%fptr(s + 1) - this%fptr(s)
+    o = this%fboff(s)
+    do j = 1, nf
+      do i = 1, nf
+        u(this%fpos(this%fptr(s) + i)) = u(this%fpos(this%fptr(s) + i)) - &
+                                         this%fblock(o + int(j - 1, i8)*nf + i)*t(this%fpos(this%fptr(s) + j))
+      end do
+    end do
+  end subroutine schur_product
+
+  !> True when every block can give S of K (schur_ok).
+  logical function all_schur_ok(this)
+    class(kplus_dense_t), intent(in) :: this
+    all_schur_ok = .true.
+    if (allocated(this%schur_ok)) all_schur_ok = all(this%schur_ok)
+  end function all_schur_ok
+
   !> t(1:n) <- (U^T U)^{-1} t(1:n), U upper triangular in packed storage.
   subroutine packed_cholesky_solve(n, up, t)
     integer(ip), intent(in) :: n
@@ -280,6 +344,7 @@ contains
                                             this%woff, this%soff)
     if (allocated(this%idof)) deallocate (this%idof, this%ddof, this%ui, this%w, this%us)
     if (allocated(this%yi)) deallocate (this%yi, this%yd)
+    if (allocated(this%schur_ok)) deallocate (this%schur_ok, this%fptr, this%fboff, this%fpos, this%fblock)
     this%nblocks = 0
     this%flops = 0
   end subroutine free
