@@ -3,7 +3,7 @@
 !> block-diagonal MUMPS factorization, 'subdomain', one per subdomain, or
 !> 'dense', kplus_dense split along the dofs B touches, factorized by
 !> build_dense once B is known and applied through the Cholesky factors of
-!> the Schur complements on those dofs, `apply_dense`). B is passed in: F
+!> the Schur complements on those dofs, `apply_touched`). B is passed in: F
 !> owns only K^+, the explicit local operators and work vectors.
 !> Timer 'F action'.
 !>
@@ -40,6 +40,9 @@ module f_operator
   use schur_complement, only: dense_schur
   implicit none
   private
+
+  !> what apply_touched multiplies the touched dofs of a subdomain by
+  integer, parameter :: touched_explicit = 1, touched_solve = 2, touched_schur = 3
 
   type, public :: f_operator_t
     private
@@ -273,7 +276,7 @@ contains
   !> `local_solver = 'dense'`: factorize every local K_reg split along the
   !> dofs B touches (kplus_dense), now that B is known; F is applied through
   !> the Cholesky factors of the Schur complements on those dofs from now on
-  !> (`apply_dense`). Local (no communication).
+  !> (`apply_touched`). Local (no communication).
   subroutine build_dense(this, b, subs, regularization)
     class(f_operator_t), intent(inout) :: this
     type(b_operator_t), intent(in) :: b
@@ -319,54 +322,9 @@ contains
     type(b_operator_t), intent(inout) :: b
     real(dp), intent(in) :: x(:), a(:)
     real(dp), intent(inout) :: y(:)
-    integer(ip) :: s, e, n
-    call b%gather_rows(x, this%wloc)
-    this%wloc2 = 0
-    select type (k => this%kinv)
-    type is (kplus_dense_t)
-      do s = 1, this%nsub
-        n = this%nd(s)
-        if (n == 0) cycle
-        this%t(1:n) = 0
-        do e = this%eoff(s) + 1, this%eoff(s + 1)
-          this%t(this%edof(e)) = this%t(this%edof(e)) + this%eval(e)*this%wloc(this%erow(e))
-        end do
-        call k%schur_product(s, this%t(1:n), this%u(1:n))
-        do e = this%eoff(s) + 1, this%eoff(s + 1)
-          this%wloc2(this%erow(e)) = this%wloc2(this%erow(e)) + a(s)*this%eval(e)*this%u(this%edof(e))
-        end do
-      end do
-    end select
-    call b%scatter_rows(this%wloc2, y)
+    call apply_touched(this, b, x, y, touched_schur, a)
   end subroutine apply_dense_schur
 
-  !> y = sum_s B^_s S_s^{-1} B^_s^T x with the packed Cholesky factors of the
-  !> Schur complements S_s (two triangular solves per subdomain).
-  subroutine apply_dense(this, b, x, y)
-    type(f_operator_t), intent(inout) :: this
-    type(b_operator_t), intent(inout) :: b
-    real(dp), intent(in) :: x(:)
-    real(dp), intent(inout) :: y(:)
-    integer(ip) :: s, e, n
-    call b%gather_rows(x, this%wloc)
-    this%wloc2 = 0
-    select type (k => this%kinv)
-    type is (kplus_dense_t)
-      do s = 1, this%nsub
-        n = this%nd(s)
-        if (n == 0) cycle
-        this%t(1:n) = 0
-        do e = this%eoff(s) + 1, this%eoff(s + 1)
-          this%t(this%edof(e)) = this%t(this%edof(e)) + this%eval(e)*this%wloc(this%erow(e))
-        end do
-        call k%solve_touched(s, this%t(1:n))
-        do e = this%eoff(s) + 1, this%eoff(s + 1)
-          this%wloc2(this%erow(e)) = this%wloc2(this%erow(e)) + this%eval(e)*this%t(this%edof(e))
-        end do
-      end do
-    end select
-    call b%scatter_rows(this%wloc2, y)
-  end subroutine apply_dense
 
   !> n_d of every local subdomain: the number of dofs B^s touches (the
   !> order of S^_s), without building anything.
@@ -400,9 +358,9 @@ contains
     if (this%explicit .and. this%sharing) then
       call this%shared_op%apply(b, x, y)
     else if (this%explicit) then
-      call apply_explicit(this, b, x, y)
+      call apply_touched(this, b, x, y, touched_explicit)
     else if (this%dense) then
-      call apply_dense(this, b, x, y)
+      call apply_touched(this, b, x, y, touched_solve)
     else
       this%xall = 0
       call b%add_transpose(x, 1.0_dp, this%xall)
@@ -413,14 +371,29 @@ contains
     call timer_stop('F action')
   end subroutine apply
 
-  !> y = sum_s B^_s S^_s B^_s^T x: gather the rows, one BLAS matrix-vector
-  !> product per subdomain, scatter-add the rows.
-  subroutine apply_explicit(this, b, x, y)
-    type(f_operator_t), intent(inout) :: this
+  !> y = sum_s a_s B^_s A_s B^_s^T x on the dofs each B^s touches: gather
+  !> the rows, t = B^_s^T x_s, u = A_s t, scatter-add a_s B^_s u (a_s = 1
+  !> without `a`). A_s by `mode`: touched_explicit the explicit S^_s (one
+  !> BLAS matrix-vector product, `storage`), touched_solve S_s^{-1} from the
+  !> dense solver's packed factor (two triangular solves), touched_schur the
+  !> Schur complement of K_s from those factors (two triangular products).
+  subroutine apply_touched(this, b, x, y, mode, a)
+    class(f_operator_t), intent(inout), target :: this
     type(b_operator_t), intent(inout) :: b
     real(dp), intent(in) :: x(:)
     real(dp), intent(inout) :: y(:)
+    integer, intent(in) :: mode
+    real(dp), intent(in), optional :: a(:)
+    type(kplus_dense_t), pointer :: kd
     integer(ip) :: s, e, n
+    real(dp) :: as
+    kd => null()
+    select type (k => this%kinv)
+    type is (kplus_dense_t)
+      kd => k
+    end select
+    if (mode /= touched_explicit .and. .not. associated(kd)) &
+      call fatal_error('f_operator: the dense local solver is not in use')
     call b%gather_rows(x, this%wloc)
     this%wloc2 = 0
     do s = 1, this%nsub
@@ -430,20 +403,30 @@ contains
       do e = this%eoff(s) + 1, this%eoff(s + 1)
         this%t(this%edof(e)) = this%t(this%edof(e)) + this%eval(e)*this%wloc(this%erow(e))
       end do
-      select case (this%storage)
-      case ('symmetric')
-        call dsymv('U', n, 1.0_dp, this%smat(this%soff(s) + 1), n, this%t, 1, 0.0_dp, this%u, 1)
-      case ('packed')
-        call dspmv('U', n, 1.0_dp, this%smat(this%soff(s) + 1), this%t, 1, 0.0_dp, this%u, 1)
+      select case (mode)
+      case (touched_explicit)
+        select case (this%storage)
+        case ('symmetric')
+          call dsymv('U', n, 1.0_dp, this%smat(this%soff(s) + 1), n, this%t, 1, 0.0_dp, this%u, 1)
+        case ('packed')
+          call dspmv('U', n, 1.0_dp, this%smat(this%soff(s) + 1), this%t, 1, 0.0_dp, this%u, 1)
+        case default
+          call dgemv('N', n, n, 1.0_dp, this%smat(this%soff(s) + 1), n, this%t, 1, 0.0_dp, this%u, 1)
+        end select
+      case (touched_solve)
+        this%u(1:n) = this%t(1:n)
+        call kd%solve_touched(s, this%u(1:n))
       case default
-        call dgemv('N', n, n, 1.0_dp, this%smat(this%soff(s) + 1), n, this%t, 1, 0.0_dp, this%u, 1)
+        call kd%schur_product(s, this%t(1:n), this%u(1:n))
       end select
+      as = 1
+      if (present(a)) as = a(s)
       do e = this%eoff(s) + 1, this%eoff(s + 1)
-        this%wloc2(this%erow(e)) = this%wloc2(this%erow(e)) + this%eval(e)*this%u(this%edof(e))
+        this%wloc2(this%erow(e)) = this%wloc2(this%erow(e)) + as*this%eval(e)*this%u(this%edof(e))
       end do
     end do
     call b%scatter_rows(this%wloc2, y)
-  end subroutine apply_explicit
+  end subroutine apply_touched
 
   !> x <- K^+ x for the concatenated vector of all local subdomains.
   subroutine local_solve(this, x)
