@@ -13,19 +13,21 @@
 !>   U_S^T U_S = S = K_DD - W^T W   (the Schur complement on D, SPD),
 !>
 !> one dense Cholesky factorization (LAPACK dpotrf) of K_reg with the
-!> interior dofs ordered first gives all three blocks; U_S is kept as a packed
-!> upper triangle. Then
+!> interior dofs ordered first gives all three blocks; U_I and U_S are kept
+!> as packed upper triangles, W is not kept (K_reg's I x D block, sparse,
+!> serves instead). Then
 !> - the F action needs (K_reg^{-1})_DD = S^{-1} only: t <- U_S^{-1} U_S^{-T} t
 !>   (two packed triangular solves, `solve_touched`), reading n_d (n_d+1)/2
 !>   values twice and never the interior;
 !> - a full solve K_reg u = b (the right-hand side d, the reconstruction) is
-!>   y_I = U_I^{-T} b_I, y_D = b_D - W^T y_I, u_D = S^{-1} y_D,
-!>   u_I = U_I^{-1} (y_I - W u_D).
+!>   z_I = K_II^{-1} b_I, u_D = S^{-1} (b_D - K_DI z_I),
+!>   u_I = K_II^{-1} (b_I - K_ID u_D), K_II^{-1} by U_I.
 !> On subdomains of a few hundred dofs the fill of a sparse factor is nearly
 !> dense anyway, and one dense factorization per subdomain costs a fraction
 !> of MUMPS's per-matrix analysis and assembly of small fronts (measured in
 !> docs/RESULTS.md "Dense local solver"). Memory per subdomain:
-!> n_I^2 + n_I n_D + n_D (n_D+1)/2 values, so it is meant for small subdomains
+!> n_I (n_I+1)/2 + n_D (n_D+1)/2 values and the nonzeros of K_ID; the
+!> factorization costs n^3/3 flops, so it is meant for small subdomains
 !> (`local_solver = 'auto'` takes it up to `params::dense_max_dofs`).
 !> With the fixing block inside D x D (schur_ok), S of K itself is
 !> U_S^T U_S minus that block: `schur_product`, the Dirichlet
@@ -37,7 +39,7 @@ module kplus_dense
   use subdomain, only: subdomain_t
   use kplus, only: regularized_system
   use local_inverse, only: local_inverse_t
-  use lapack_interfaces, only: dpotrf, dtrsv, dtpsv, dtpmv, dgemv
+  use lapack_interfaces, only: dpotrf, dtpsv, dtpmv
   implicit none
   private
 
@@ -47,10 +49,14 @@ module kplus_dense
     integer(ip), allocatable :: ni(:), nd(:)    !< (nblocks) interior and touched dofs
     integer(ip), allocatable :: iptr(:), dptr(:) !< (nblocks+1) offsets into idof, ddof
     integer(ip), allocatable :: idof(:), ddof(:) !< local dof numbers of I and D (ascending)
-    integer(i8), allocatable :: uoff(:), woff(:), soff(:) !< (nblocks+1) offsets into ui, w, us
-    real(dp), allocatable :: ui(:)              !< U_I, n_I x n_I column-major, upper triangle
-    real(dp), allocatable :: w(:)               !< W, n_I x n_D column-major
+    integer(i8), allocatable :: uoff(:), soff(:) !< (nblocks+1) offsets into ui, us
+    real(dp), allocatable :: ui(:)              !< U_I, packed upper triangle
     real(dp), allocatable :: us(:)              !< U_S, packed upper triangle
+    !> K_reg's I x D block in CSR (rows: interior positions of all blocks,
+    !> kptr(iptr(s)+1 : iptr(s+1)+1); columns: touched positions 1..n_D of the block)
+    integer(i8), allocatable :: kptr(:)
+    integer(ip), allocatable :: kcol(:)
+    real(dp), allocatable :: kval(:)
     real(dp) :: flops = 0                       !< flops of the factorizations
     !> the fixing block rho_f Q_F Q_F^T of each K_reg when all its dofs are
     !> touched (schur_ok): positions in the touched numbering and the dense
@@ -59,7 +65,7 @@ module kplus_dense
     integer(ip), allocatable :: fptr(:), fpos(:)
     integer(i8), allocatable :: fboff(:)
     real(dp), allocatable :: fblock(:)
-    real(dp), allocatable :: yi(:), yd(:)       !< work
+    real(dp), allocatable :: yi(:), yd(:), zi(:) !< work
   contains
     procedure :: init
     procedure :: init_split
@@ -120,12 +126,11 @@ contains
     if (size(tptr) /= this%nblocks + 1) call fatal_error('kplus_dense%init_split: tptr must have nblocks+1 entries')
     allocate (this%offset(this%nblocks + 1), this%ni(this%nblocks), this%nd(this%nblocks), &
               this%iptr(this%nblocks + 1), this%dptr(this%nblocks + 1), this%uoff(this%nblocks + 1), &
-              this%woff(this%nblocks + 1), this%soff(this%nblocks + 1))
+              this%soff(this%nblocks + 1))
     this%offset(1) = 0
     this%iptr(1) = 0
     this%dptr(1) = 0
     this%uoff(1) = 0
-    this%woff(1) = 0
     this%soff(1) = 0
     do s = 1, this%nblocks
       n = subs(s)%ndof
@@ -137,16 +142,17 @@ contains
       this%nd(s) = nd
       this%iptr(s + 1) = this%iptr(s) + ni
       this%dptr(s + 1) = this%dptr(s) + nd
-      this%uoff(s + 1) = this%uoff(s) + int(ni, i8)*ni
-      this%woff(s + 1) = this%woff(s) + int(ni, i8)*nd
+      this%uoff(s + 1) = this%uoff(s) + int(ni, i8)*(ni + 1)/2
       this%soff(s + 1) = this%soff(s) + int(nd, i8)*(nd + 1)/2
     end do
     allocate (this%idof(this%iptr(this%nblocks + 1)), this%ddof(this%dptr(this%nblocks + 1)), &
-              this%ui(this%uoff(this%nblocks + 1)), this%w(this%woff(this%nblocks + 1)), &
+              this%ui(this%uoff(this%nblocks + 1)), this%kptr(this%iptr(this%nblocks + 1) + 1), &
               this%us(this%soff(this%nblocks + 1)))
     nimax = maxval([1_ip, this%ni])
     ndmax = maxval([1_ip, this%nd])
-    allocate (this%yi(nimax), this%yd(ndmax))
+    allocate (this%yi(nimax), this%yd(ndmax), this%zi(nimax))
+    this%kptr(1) = 0
+    allocate (this%kcol(0), this%kval(0))
     allocate (this%schur_ok(this%nblocks), this%fptr(this%nblocks + 1), this%fboff(this%nblocks + 1))
     allocate (this%fpos(0), this%fblock(0))
     this%fptr(1) = 0
@@ -205,15 +211,14 @@ contains
         j = max(pos(irn(e)), pos(jcn(e)))
         kd(i, j) = kd(i, j) + a(e)
       end do
+      ! K_reg's I x D block (rows of I, the upper part of kd), kept sparse for
+      ! the full solves instead of the dense W = U_I^{-T} K_ID
+      call append_kid(kd, ni, nd, this%iptr(s))
       call dpotrf('U', n, kd, size(kd, 1), info)
       if (info /= 0) call fatal_error('kplus_dense: K_reg is not positive definite (LAPACK dpotrf failed)')
       o = this%uoff(s)
       do j = 1, ni
-        this%ui(o + int(j - 1, i8)*ni + 1:o + int(j, i8)*ni) = kd(1:ni, j)
-      end do
-      o = this%woff(s)
-      do j = 1, nd
-        this%w(o + int(j - 1, i8)*ni + 1:o + int(j, i8)*ni) = kd(1:ni, ni + j)
+        this%ui(o + int(j, i8)*(j - 1)/2 + 1:o + int(j, i8)*(j + 1)/2) = kd(1:j, j)
       end do
       o = this%soff(s)
       do j = 1, nd
@@ -222,6 +227,40 @@ contains
       this%flops = this%flops + real(ni, dp)**3/3 + real(ni, dp)**2*nd + real(nd, dp)**2*ni + &
                    real(nd, dp)**3/3
     end do
+  contains
+
+    !> The nonzeros of kd(1:ni, ni+1:ni+nd) by rows into kptr/kcol/kval,
+    !> rows after `row0` (the block's first interior position - 1).
+    subroutine append_kid(kd, ni, nd, row0)
+      real(dp), intent(in) :: kd(:, :)
+      integer(ip), intent(in) :: ni, nd, row0
+      integer(ip) :: r, c
+      integer(i8) :: nz, k0
+      k0 = this%kptr(row0 + 1)
+      nz = count(kd(1:ni, ni + 1:ni + nd) /= 0, kind=i8)
+      if (k0 + nz > size(this%kcol, kind=i8)) call grow_kid(max(k0 + nz, 2*size(this%kcol, kind=i8)))
+      nz = k0
+      do r = 1, ni
+        do c = 1, nd
+          if (kd(r, ni + c) == 0) cycle
+          nz = nz + 1
+          this%kcol(nz) = c
+          this%kval(nz) = kd(r, ni + c)
+        end do
+        this%kptr(row0 + r + 1) = nz
+      end do
+    end subroutine append_kid
+
+    subroutine grow_kid(cap)
+      integer(i8), intent(in) :: cap
+      integer(ip), allocatable :: tc(:)
+      real(dp), allocatable :: tv(:)
+      allocate (tc(cap), tv(cap))
+      tc(1:size(this%kcol)) = this%kcol
+      tv(1:size(this%kval)) = this%kval
+      call move_alloc(tc, this%kcol)
+      call move_alloc(tv, this%kval)
+    end subroutine grow_kid
   end subroutine init_split
 
   !> x <- K^+ x for the concatenated vector of all blocks.
@@ -242,13 +281,16 @@ contains
         this%yd(k) = x(o + this%ddof(this%dptr(s) + k))
       end do
       if (ni > 0) then
-        call dtrsv('U', 'T', 'N', ni, this%ui(this%uoff(s) + 1), ni, this%yi, 1)
-        if (nd > 0) call dgemv('T', ni, nd, -1.0_dp, this%w(this%woff(s) + 1), ni, this%yi, 1, 1.0_dp, this%yd, 1)
+        ! z_I = K_II^{-1} b_I, y_D = b_D - K_DI z_I
+        this%zi(1:ni) = this%yi(1:ni)
+        call packed_cholesky_solve(ni, this%ui(this%uoff(s) + 1:this%uoff(s + 1)), this%zi)
+        if (nd > 0) call kid_product(this, s, this%zi, this%yd, transposed=.true.)
       end if
       if (nd > 0) call packed_cholesky_solve(nd, this%us(this%soff(s) + 1:this%soff(s + 1)), this%yd)
       if (ni > 0) then
-        if (nd > 0) call dgemv('N', ni, nd, -1.0_dp, this%w(this%woff(s) + 1), ni, this%yd, 1, 1.0_dp, this%yi, 1)
-        call dtrsv('U', 'N', 'N', ni, this%ui(this%uoff(s) + 1), ni, this%yi, 1)
+        ! u_I = K_II^{-1} (b_I - K_ID u_D)
+        if (nd > 0) call kid_product(this, s, this%yd, this%yi, transposed=.false.)
+        call packed_cholesky_solve(ni, this%ui(this%uoff(s) + 1:this%uoff(s + 1)), this%yi)
       end if
       do k = 1, ni
         x(o + this%idof(this%iptr(s) + k)) = this%yi(k)
@@ -258,6 +300,29 @@ contains
       end do
     end do
   end subroutine solve
+
+  !> transposed: y_D -= K_DI v_I; else y_I -= K_ID v_D (block s).
+  subroutine kid_product(this, s, v, y, transposed)
+    class(kplus_dense_t), intent(in) :: this
+    integer(ip), intent(in) :: s
+    real(dp), intent(in) :: v(:)
+    real(dp), intent(inout) :: y(:)
+    logical, intent(in) :: transposed
+    integer(ip) :: r, row0
+    integer(i8) :: e
+    row0 = this%iptr(s)
+    do r = 1, this%ni(s)
+      if (transposed) then
+        do e = this%kptr(row0 + r) + 1, this%kptr(row0 + r + 1)
+          y(this%kcol(e)) = y(this%kcol(e)) - this%kval(e)*v(r)
+        end do
+      else
+        do e = this%kptr(row0 + r) + 1, this%kptr(row0 + r + 1)
+          y(r) = y(r) - this%kval(e)*v(this%kcol(e))
+        end do
+      end if
+    end do
+  end subroutine kid_product
 
   !> t <- S_s^{-1} t = ((K_reg^s)^{-1})_DD t for block s, t on its touched
   !> dofs in ascending order (length n_d).
@@ -329,7 +394,8 @@ contains
     class(kplus_dense_t), intent(in) :: this
     factor_bytes = 0
     if (.not. allocated(this%ui)) return
-    factor_bytes = 8*(size(this%ui, kind=i8) + size(this%w, kind=i8) + size(this%us, kind=i8))
+    factor_bytes = 8*(size(this%ui, kind=i8) + size(this%us, kind=i8)) + 12*size(this%kval, kind=i8) + &
+                   8*size(this%kptr, kind=i8)
   end function factor_bytes
 
   !> Flops of the factorizations (n_I^3/3 + n_I^2 n_D + n_D^2 n_I + n_D^3/3 per block).
@@ -341,9 +407,10 @@ contains
   subroutine free(this)
     class(kplus_dense_t), intent(inout) :: this
     if (allocated(this%offset)) deallocate (this%offset, this%ni, this%nd, this%iptr, this%dptr, this%uoff, &
-                                            this%woff, this%soff)
-    if (allocated(this%idof)) deallocate (this%idof, this%ddof, this%ui, this%w, this%us)
-    if (allocated(this%yi)) deallocate (this%yi, this%yd)
+                                            this%soff)
+    if (allocated(this%idof)) deallocate (this%idof, this%ddof, this%ui, this%us, this%kptr)
+    if (allocated(this%kcol)) deallocate (this%kcol, this%kval)
+    if (allocated(this%yi)) deallocate (this%yi, this%yd, this%zi)
     if (allocated(this%schur_ok)) deallocate (this%schur_ok, this%fptr, this%fboff, this%fpos, this%fblock)
     this%nblocks = 0
     this%flops = 0
