@@ -197,7 +197,7 @@ contains
         ! the dense K^+ already holds (LAPACK dpptri: 2 n^3 / 3 flops)
         select type (k => this%kinv)
         type is (kplus_dense_t)
-          up = k%touched(s)
+          up = k%schur_factor(s)
         end select
         call timer_start('explicit F: inverse')
         call dpptri('U', n, up, info)
@@ -239,8 +239,8 @@ contains
     real(dp), allocatable :: val(:)
     integer(ip) :: s, e, ne, ndmax, n, i
     this%n_local_rows = b%n_local_rows()
-    this%nd = this%touched_dofs(b)
-    allocate (this%eoff(this%nsub + 1), tptr(this%nsub + 1))
+    if (allocated(this%nd)) deallocate (this%nd)
+    allocate (this%eoff(this%nsub + 1), tptr(this%nsub + 1), this%nd(this%nsub))
     ne = 0
     this%eoff(1) = 0
     tptr(1) = 0
@@ -248,6 +248,7 @@ contains
       call b%subdomain_entries(s, row, dof, val)
       ne = ne + size(row, kind=ip)
       this%eoff(s + 1) = ne
+      call sort_unique(dof, this%nd(s))
       tptr(s + 1) = tptr(s) + this%nd(s)
     end do
     allocate (this%erow(ne), this%edof(ne), this%eval(ne), touched(tptr(this%nsub + 1)))

@@ -73,7 +73,7 @@ module kplus_dense
     procedure :: solve_touched
     procedure :: schur_product
     procedure :: all_schur_ok
-    procedure :: touched
+    procedure :: schur_factor
     procedure :: factor_bytes
     procedure :: factor_flops
     procedure :: free
@@ -184,20 +184,17 @@ contains
         pos(i) = k
         this%idof(this%iptr(s) + k) = i
       end do
-      ! K_reg, dense, in the order (I, D): its Cholesky factor is then
-      ! [U_I W; 0 U_S] (one dpotrf for all three blocks)
       ! fixing nodes among the nodes whose three dofs are touched, where
       ! they fix the rigid body motions: then K_reg differs from K on D x D
       ! only, and S of K is U_S^T U_S minus the fixing block (schur_product)
       allowed = [(all(is_d(3*k - 2:3*k)), k=1, subs(s)%nnodes)]
       call regularized_system(subs(s), regularization, 'amd', irn, jcn, a, perm, allowed, fdofs, fblk)
       this%schur_ok(s) = all(is_d(fdofs))
-      if (this%schur_ok(s)) then
-        this%fpos = [this%fpos, pos(fdofs)]
-        this%fblock = [this%fblock, reshape(fblk, [size(fblk)])]
-      end if
-      this%fptr(s + 1) = size(this%fpos, kind=ip)
-      this%fboff(s + 1) = size(this%fblock, kind=i8)
+      this%fptr(s + 1) = this%fptr(s)
+      this%fboff(s + 1) = this%fboff(s)
+      if (this%schur_ok(s)) call append_fixing(pos(fdofs), fblk, s)
+      ! K_reg, dense, in the order (I, D): its Cholesky factor is then
+      ! [U_I W; 0 U_S] (one dpotrf for all three blocks)
       do k = 1, n
         if (is_d(k)) pos(k) = pos(k) + ni
       end do
@@ -250,6 +247,33 @@ contains
         this%kptr(row0 + r + 1) = nz
       end do
     end subroutine append_kid
+
+    !> The fixing block of block s on its touched positions, appended to
+    !> fpos/fblock (grown by doubling: one append per subdomain).
+    subroutine append_fixing(fp, blk, s)
+      integer(ip), intent(in) :: fp(:), s
+      real(dp), intent(in) :: blk(:, :)
+      integer(ip), allocatable :: tp(:)
+      real(dp), allocatable :: tb(:)
+      integer(ip) :: nf
+      integer(i8) :: nb
+      nf = size(fp, kind=ip)
+      nb = int(nf, i8)*nf
+      if (this%fptr(s) + nf > size(this%fpos)) then
+        allocate (tp(max(this%fptr(s) + nf, 2*size(this%fpos, kind=ip))))
+        tp(1:this%fptr(s)) = this%fpos(1:this%fptr(s))
+        call move_alloc(tp, this%fpos)
+      end if
+      if (this%fboff(s) + nb > size(this%fblock, kind=i8)) then
+        allocate (tb(max(this%fboff(s) + nb, 2*size(this%fblock, kind=i8))))
+        tb(1:this%fboff(s)) = this%fblock(1:this%fboff(s))
+        call move_alloc(tb, this%fblock)
+      end if
+      this%fpos(this%fptr(s) + 1:this%fptr(s) + nf) = fp
+      this%fblock(this%fboff(s) + 1:this%fboff(s) + nb) = reshape(blk, [nb])
+      this%fptr(s + 1) = this%fptr(s) + nf
+      this%fboff(s + 1) = this%fboff(s) + nb
+    end subroutine append_fixing
 
     subroutine grow_kid(cap)
       integer(i8), intent(in) :: cap
@@ -382,12 +406,12 @@ contains
   end subroutine packed_cholesky_solve
 
   !> The packed upper triangle of U_S of block s (for the explicit inverse).
-  function touched(this, s) result(u)
+  function schur_factor(this, s) result(u)
     class(kplus_dense_t), intent(in) :: this
     integer(ip), intent(in) :: s
     real(dp), allocatable :: u(:)
     u = this%us(this%soff(s) + 1:this%soff(s + 1))
-  end function touched
+  end function schur_factor
 
   !> Bytes of the stored factors (U_I, W, U_S).
   integer(i8) function factor_bytes(this)
