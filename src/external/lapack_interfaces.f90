@@ -5,7 +5,7 @@ module lapack_interfaces
   use kinds, only: dp
   implicit none
   private
-  public :: dpotrf, dpotri, dsyev, dsymv, dspmv, dgemv, dgemm, dtrsm, dtrsv, dsyrk, dtpsv, dpptri, dtpmv
+  public :: dpotrf, dpotrs, dpotri, dsyev, dsymv, dspmv, dgemv, dgemm, dtrsm, dtrsv, dsyrk, dtpsv, dpptri, dtpmv
 
   interface
     !> Cholesky factor of a symmetric positive definite matrix.
@@ -16,6 +16,15 @@ module lapack_interfaces
       real(dp), intent(inout) :: a(lda, *)
       integer, intent(out) :: info
     end subroutine dpotrf
+    !> Solve A X = B with the Cholesky factor of dpotrf.
+    subroutine dpotrs(uplo, n, nrhs, a, lda, b, ldb, info)
+      import :: dp
+      character(len=1), intent(in) :: uplo
+      integer, intent(in) :: n, nrhs, lda, ldb
+      real(dp), intent(in) :: a(lda, *)
+      real(dp), intent(inout) :: b(ldb, *)
+      integer, intent(out) :: info
+    end subroutine dpotrs
     !> Inverse from the Cholesky factor of dpotrf.
     subroutine dpotri(uplo, n, a, lda, info)
       import :: dp

@@ -31,6 +31,16 @@
 !> 'redundant' placement (every rank factorizes alone; a solve is one
 !> MPI_Allgatherv and a local MUMPS solve), c = P the old 'distributed' one
 !> (one factorization on all ranks; a solve gathers to rank 0 and scatters).
+!>
+!> Dense factor (&solver coarse_factor, issue 14, session 15): on a group of
+!> one rank the whole G G^T may instead be factorized by LAPACK's dense
+!> Cholesky (dpotrf; solves by dpotrs). For small coarse problems (a few
+!> hundred rows) MUMPS's fixed cost per call dominates its solves (its
+!> driver recomputes the size of a saved instance, duplicates and frees
+!> communicators, gathers and scatters the right-hand side on every call)
+!> while the dense factor of n = 384 rows is 1.2 MB; 'auto' takes the dense
+!> factor up to coarse_dense_max rows (measured in docs/RESULTS.md "Dense
+!> coarse factor").
 module coarse_problem
   use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_IP
   use decomposition, only: decomposition_t, subdomain_graph
@@ -40,7 +50,7 @@ module coarse_problem
   use block_hash, only: block_hash_t
   use errors, only: fatal_error
   use timers, only: timer_start, timer_stop
-  use lapack_interfaces, only: dpotrf, dtrsv, dgemm, dgemv
+  use lapack_interfaces, only: dpotrf, dpotrs, dtrsv, dgemm, dgemv
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gatherv, MPI_Scatterv, MPI_Wtime, &
                      MPI_Allgatherv, MPI_Isend, MPI_Irecv, MPI_Waitall, MPI_Request, MPI_STATUSES_IGNORE, &
                      MPI_INTEGER, MPI_Comm_split, &
@@ -51,6 +61,7 @@ module coarse_problem
   private
 
   public :: coarse_layout_t, build_coarse_layout, ensure_row_blocks, row_blocks
+  public :: dense_for
   public :: coarse_options_t, group_starts, choose_coarse_ranks, estimated_factor_bytes, ranks_per_node
 
   !> How the coarse problem is factorized (&solver coarse_ranks, coarse_blr,
@@ -59,7 +70,13 @@ module coarse_problem
     integer :: ranks_per_group = 0          !< c; 0 or more than the ranks: one group of all ranks
     real(dp) :: blr = 0                     !< MUMPS BLR dropping tolerance (0: full rank)
     logical :: ooc = .false.                !< MUMPS out-of-core factors
+    !> 'mumps' | 'dense' (groups of one rank only) | 'auto' (dense_for)
+    character(len=8) :: factor = 'mumps'
   end type coarse_options_t
+
+  !> coarse_factor = 'auto': the dense Cholesky factor on one-rank groups up
+  !> to this coarse dimension (docs/RESULTS.md "Dense coarse factor")
+  integer(ip), parameter, public :: coarse_dense_max = 1000
 
   !> Automatic ranks per group: the estimated factor of G G^T divided among
   !> a group's ranks should stay below this many bytes per rank (see
@@ -90,6 +107,10 @@ module coarse_problem
     integer(ip) :: n = 0                    !< coarse dimension 6*nsub
     integer(i8) :: nnz_local = 0            !< entries this rank gave to MUMPS
     type(mumps_t) :: mumps
+    !> the dense way (coarse_factor): the Cholesky factor U (upper, n x n) of the
+    !> whole matrix on this one-rank group, in place of the MUMPS instance
+    logical :: dense = .false.
+    real(dp), allocatable :: ufac(:, :)
     real(dp), allocatable :: rhs(:, :)      !< (n, 1) on rank 0
     logical :: factorized = .false.
     integer :: rank = 0
@@ -138,6 +159,7 @@ module coarse_problem
     procedure :: factor_entries
     procedure :: factor_entries_effective
     procedure :: mumps_memory_mb
+    procedure :: is_dense
     procedure :: free
   end type coarse_problem_t
 
@@ -222,6 +244,14 @@ contains
     this%seconds_phase = 0
     this%seconds_phase(1) = MPI_Wtime() - t0
     call timer_stop('coarse: assembly')
+    this%dense = dense_for(opt%factor, this%n, this%group_size)
+    if (this%dense) then
+      call dense_factorize(this, irn, jcn, a)
+      deallocate (irn, jcn, a)
+      this%factorized = .true.
+      allocate (this%rhs(this%n, 1))
+      return
+    end if
     call this%mumps%init(this%group_comm, .true.)
     if (this%group_size == 1) then
       call this%mumps%set_centralized(this%n, irn, jcn, a)
@@ -280,6 +310,11 @@ contains
     this%seconds_phase(1) = MPI_Wtime() - t0
     call timer_stop('coarse: assembly')
     call this%clear_update()
+    if (this%dense) then
+      call dense_factorize(this, irn, jcn, a)
+      this%refactorizations = this%refactorizations + 1
+      return
+    end if
     call timer_start('coarse: factorization')
     call this%mumps%refactorize(a)
     call timer_stop('coarse: factorization')
@@ -558,7 +593,11 @@ contains
     do j = 1, m
       call gather_column(this, b(:, j), rhs(:, j))
     end do
-    call this%mumps%solve(rhs)
+    if (this%dense) then
+      call dense_solve(this, rhs)
+    else
+      call this%mumps%solve(rhs)
+    end if
     do j = 1, m
       call scatter_column(this, rhs(:, j), x(:, j))
     end do
@@ -669,6 +708,10 @@ contains
   !> RINFOG(3), the whole group's).
   real(dp) function factor_flops(this)
     class(coarse_problem_t), intent(in) :: this
+    if (this%dense) then
+      factor_flops = real(this%n, dp)**3/3
+      return
+    end if
     factor_flops = this%mumps%factor_flops()
   end function factor_flops
 
@@ -681,7 +724,11 @@ contains
     real(dp), intent(in) :: b(:)
     real(dp), intent(out) :: x(:)
     call gather_column(this, b, this%rhs(:, 1))
-    call this%mumps%solve(this%rhs)
+    if (this%dense) then
+      call dense_solve(this, this%rhs)
+    else
+      call this%mumps%solve(this%rhs)
+    end if
     call scatter_column(this, this%rhs(:, 1), x)
   end subroutine solve_base
 
@@ -901,12 +948,20 @@ contains
   !> Entries of this group's factors (full rank), summed over its ranks.
   integer(i8) function factor_entries(this)
     class(coarse_problem_t), intent(in) :: this
+    if (this%dense) then
+      factor_entries = int(this%n, i8)*(this%n + 1)/2
+      return
+    end if
     factor_entries = this%mumps%factor_entries()
   end function factor_entries
 
   !> Entries of this group's factors after BLR compression.
   integer(i8) function factor_entries_effective(this)
     class(coarse_problem_t), intent(in) :: this
+    if (this%dense) then
+      factor_entries_effective = int(this%n, i8)*(this%n + 1)/2
+      return
+    end if
     factor_entries_effective = this%mumps%factor_entries_effective()
   end function factor_entries_effective
 
@@ -915,13 +970,78 @@ contains
   function mumps_memory_mb(this) result(mb)
     class(coarse_problem_t), intent(in) :: this
     integer(i8) :: mb(2)
+    if (this%dense) then
+      mb = (8*int(this%n, i8)**2 + 999999)/1000000
+      return
+    end if
     mb = this%mumps%memory_mb()
   end function mumps_memory_mb
+
+  !> Factorized by the dense Cholesky (coarse_factor) instead of MUMPS.
+  logical function is_dense(this)
+    class(coarse_problem_t), intent(in) :: this
+    is_dense = this%dense
+  end function is_dense
+
+  !> Whether a group of `group_size` ranks factorizes a coarse matrix of
+  !> dimension n densely for &solver coarse_factor = `factor`: 'dense' on a
+  !> one-rank group, 'auto' there up to coarse_dense_max rows, else MUMPS.
+  pure logical function dense_for(factor, n, group_size)
+    character(len=*), intent(in) :: factor
+    integer(ip), intent(in) :: n
+    integer, intent(in) :: group_size
+    dense_for = group_size == 1 .and. (factor == 'dense' .or. (factor == 'auto' .and. n <= coarse_dense_max))
+  end function dense_for
+
+  !> The dense way: the whole upper-triangle COO of this one-rank group
+  !> (entries of the same position summed, as MUMPS sums them) into U, then
+  !> U^T U = A by LAPACK dpotrf. G G^T (and every G_M G_M^T the polish and
+  !> the reconstruction factorize) is symmetric positive definite when the
+  !> rows of G are independent, as for MUMPS's SPD mode; a failure is fatal.
+  subroutine dense_factorize(this, irn, jcn, a)
+    class(coarse_problem_t), intent(inout) :: this
+    integer(ip), intent(in) :: irn(:), jcn(:)
+    real(dp), intent(in) :: a(:)
+    integer(i8) :: e
+    integer :: info
+    real(dp) :: t0
+    character(len=160) :: msg
+    call timer_start('coarse: factorization')
+    t0 = MPI_Wtime()
+    if (.not. allocated(this%ufac)) allocate (this%ufac(this%n, this%n))
+    this%ufac = 0
+    do e = 1, size(a, kind=i8)
+      associate (i => min(irn(e), jcn(e)), j => max(irn(e), jcn(e)))
+        this%ufac(i, j) = this%ufac(i, j) + a(e)
+      end associate
+    end do
+    call dpotrf('U', int(this%n), this%ufac, int(this%n), info)
+    if (info /= 0) then
+      write (msg, '(a,i0,a,i0,a)') 'coarse_problem: the dense Cholesky factorization of the coarse matrix '// &
+        '(dimension ', this%n, ') failed at pivot ', info, ': it is not positive definite'
+      call fatal_error(trim(msg))
+    end if
+    this%seconds_phase(3) = 0
+    this%seconds_phase(4) = MPI_Wtime() - t0
+    this%seconds_factorization = this%seconds_phase(4)
+    call timer_stop('coarse: factorization')
+  end subroutine dense_factorize
+
+  !> rhs <- A^{-1} rhs (all columns) with the dense factor.
+  subroutine dense_solve(this, rhs)
+    class(coarse_problem_t), intent(inout) :: this
+    real(dp), intent(inout) :: rhs(:, :)
+    integer :: info
+    call dpotrs('U', int(this%n), size(rhs, 2), this%ufac, int(this%n), rhs, size(rhs, 1), info)
+    if (info /= 0) call fatal_error('coarse_problem: LAPACK dpotrs failed')
+  end subroutine dense_solve
 
   subroutine free(this)
     class(coarse_problem_t), intent(inout) :: this
     integer :: ierr
-    if (this%factorized) call this%mumps%free()
+    if (this%factorized .and. .not. this%dense) call this%mumps%free()
+    if (allocated(this%ufac)) deallocate (this%ufac)
+    this%dense = .false.
     this%factorized = .false.
     this%reusable = .false.
     this%refactorizations = 0

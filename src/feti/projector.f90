@@ -68,16 +68,24 @@ contains
     call choose_coarse_ranks(s%coarse_ranks, s%coarse_placement, nranks, dec%nsubdomains, c, msg, &
                              node_ranks=ranks_per_node(comm))
     if (len_trim(msg) > 0) call collective_error(msg, comm, exit_input_error)
-    this%options = coarse_options_t(c, s%coarse_blr, s%coarse_ooc)
+    ! the dense factor lives on every rank: groups of one rank
+    if (s%coarse_factor == 'dense') c = 1
+    this%options = coarse_options_t(c, s%coarse_blr, s%coarse_ooc, s%coarse_factor)
     con => b%constraints()
     call build_coarse_layout(dec, comm, this%layout)
     call this%coarse%init(dec, con, this%layout, comm, options=this%options)
     associate (mb => this%coarse%mumps_memory_mb())
-      write (msg, '(a,i0,a,i0,a,i0,a,es9.2,a,l1,a,i0,a,i0,a,i0,a,i0,a)') 'coarse problem: dimension ', &
-        6*dec%nsubdomains, ', ', this%coarse%groups(), ' group(s) of ', this%coarse%ranks_per_group(), &
-        ' rank(s) (BLR ', s%coarse_blr, ', out-of-core ', s%coarse_ooc, '); factor entries ', &
-        this%coarse%factor_entries(), ' (after BLR ', this%coarse%factor_entries_effective(), &
-        '), MUMPS factorization memory ', mb(1), ' MB max per rank, ', mb(2), ' MB per group'
+      if (this%coarse%is_dense()) then
+        write (msg, '(a,i0,a,i0,3a,i0,a)') 'coarse problem: dimension ', 6*dec%nsubdomains, ', ', &
+          this%coarse%groups(), ' group(s) of 1 rank, dense LAPACK Cholesky factor (coarse_factor ''', &
+          trim(s%coarse_factor), '''), ', mb(1), ' MB per rank'
+      else
+        write (msg, '(a,i0,a,i0,a,i0,a,es9.2,a,l1,a,i0,a,i0,a,i0,a,i0,a)') 'coarse problem: dimension ', &
+          6*dec%nsubdomains, ', ', this%coarse%groups(), ' group(s) of ', this%coarse%ranks_per_group(), &
+          ' rank(s) (BLR ', s%coarse_blr, ', out-of-core ', s%coarse_ooc, '); factor entries ', &
+          this%coarse%factor_entries(), ' (after BLR ', this%coarse%factor_entries_effective(), &
+          '), MUMPS factorization memory ', mb(1), ' MB max per rank, ', mb(2), ' MB per group'
+      end if
     end associate
     call log_message(msg)
     allocate (this%cwork(6*this%layout%nlocal), this%cwork2(6*this%layout%nlocal))

@@ -121,6 +121,9 @@ module params
     integer(ip) :: coarse_ranks = 0           !< ranks per coarse group (0: chosen from the coarse dimension)
     real(dp) :: coarse_blr = 0                !< MUMPS BLR dropping tolerance for G G^T (0: full rank)
     logical :: coarse_ooc = .false.           !< MUMPS out-of-core factors of G G^T
+    !> how G G^T is factorized: 'mumps' | 'dense' (LAPACK Cholesky, one-rank
+    !> coarse groups) | 'auto' ('dense' up to coarse_dense_max, else 'mumps')
+    character(len=name_len) :: coarse_factor = 'auto'
     real(dp) :: regularization = 1            !< rho_f relative to the mean diagonal of K
     character(len=name_len) :: scaling = 'young'  !< rows of B weighted by Young's moduli: 'young' | 'none'
     !> SMALBE's stopping test: 'violation' (largest constraint violation in
@@ -521,7 +524,7 @@ contains
                 regularization, active_tol, kkt_tol, preconditioner_switch
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
-                               m_no_step, f_action, f_storage, share_subdomains, preconditioner
+                               m_no_step, f_action, f_storage, share_subdomains, preconditioner, coarse_factor
     character(len=path_len) :: directory
     logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report, coarse_ooc, polish_release, &
                polish_first
@@ -533,8 +536,8 @@ contains
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
       m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, rho_window, rho_stall, polish_window, &
       polish_rounds, polish_release, polish_settle, polish_loose, polish_predict, polish_first, &
-      power_iterations, coarse, coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, local_ordering, local_solver, &
-      f_action, f_storage, share_subdomains, &
+      power_iterations, coarse, coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, coarse_factor, local_ordering, &
+      local_solver, f_action, f_storage, share_subdomains, &
       regularization, scaling, stopping, preconditioner, preconditioner_switch, monitor
     namelist /reconstruction/ method, active_tol, kkt_tol
     character(len=name_len) :: run_name
@@ -584,7 +587,7 @@ contains
         local_ordering = s%local_ordering; local_solver = s%local_solver
         f_action = s%f_action; f_storage = s%f_storage; share_subdomains = s%share_subdomains
         coarse_placement = s%coarse_placement; coarse_ranks = s%coarse_ranks
-        coarse_blr = s%coarse_blr; coarse_ooc = s%coarse_ooc
+        coarse_blr = s%coarse_blr; coarse_ooc = s%coarse_ooc; coarse_factor = s%coarse_factor
         regularization = s%regularization; scaling = s%scaling; stopping = s%stopping; monitor = s%monitor
         preconditioner = s%preconditioner; preconditioner_switch = s%preconditioner_switch
       end associate
@@ -622,7 +625,7 @@ contains
                                  polish_first, power_iterations, lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
                                  lower(share_subdomains), &
-                                 lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, &
+                                 lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, lower(coarse_factor), &
                                  regularization, lower(scaling), lower(stopping), lower(preconditioner), &
                                  preconditioner_switch, monitor)
     case ('reconstruction')
@@ -749,6 +752,11 @@ contains
                   "'distributed' = all ranks), not both", ints([s%coarse_ranks])//', '//trim(s%coarse_placement))
       if (.not. (s%coarse_blr >= 0 .and. s%coarse_blr < 1)) &
         call fail('solver', 'coarse_blr', 'must be in [0, 1) (0: full-rank factors)', reals([s%coarse_blr]))
+      if (.not. one_of(s%coarse_factor, [character(len=6) :: 'auto', 'mumps', 'dense'])) &
+        call fail('solver', 'coarse_factor', "must be 'auto', 'mumps' or 'dense'", s%coarse_factor)
+      if (s%coarse_factor == 'dense' .and. (s%coarse_ranks > 1 .or. s%coarse_placement == 'distributed')) &
+        call fail('solver', 'coarse_factor', "'dense' factorizes G G^T on every rank: it needs coarse groups of one "// &
+                  "rank (coarse_ranks = 0 or 1, coarse_placement 'auto' or 'redundant')", s%coarse_factor)
       if (.not. one_of(s%local_solver, [character(len=10) :: 'auto', 'dense', 'block', 'subdomain'])) &
         call fail('solver', 'local_solver', "must be 'auto', 'dense', 'block' or 'subdomain'", s%local_solver)
       if (.not. one_of(s%f_action, [character(len=10) :: 'implicit', 'explicit', 'auto'])) &
