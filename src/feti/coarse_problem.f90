@@ -76,7 +76,7 @@ module coarse_problem
 
   !> coarse_factor = 'auto': the dense Cholesky factor on one-rank groups up
   !> to this coarse dimension (docs/RESULTS.md "Dense coarse factor")
-  integer(ip), parameter, public :: coarse_dense_max = 1000
+  integer(ip), parameter, public :: coarse_dense_max = 500
 
   !> Automatic ranks per group: the estimated factor of G G^T divided among
   !> a group's ranks should stay below this many bytes per rank (see

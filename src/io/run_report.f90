@@ -157,6 +157,7 @@ contains
                        [int(cp%ranks_per_group(), i8), int(cp%groups(), i8), cp%factor_entries(), &
                         cp%factor_entries_effective(), cp%mumps_memory_mb()])
       call js%add('factorization_seconds', cp%factorization_seconds())
+      call js%add('dense', cp%is_dense())
       call js%end_object()
     end block
     associate (b => blas_in_use())                 ! set up by the main program
