@@ -348,8 +348,12 @@ contains
     ! 1. the 6-blocks of every row, by copy slot, summed at the owner (once per run)
     call ensure_row_blocks(con)
 
-    ! 2. g_r g_r^T of every owned row into 6x6 blocks
-    call blocks%init(max(64_ip, 8*this%layout%nlocal + con%n_own/4))
+    ! 2. g_r g_r^T of every owned row into 6x6 blocks. The hash is sized by the blocks, not by the
+    ! rows: a subdomain has at most 26 neighbours, so about 14 upper blocks (its diagonal one and
+    ! one per neighbour pair), plus the pairs with other ranks' subdomains that its owned rows
+    ! give; the hash grows if that is too few. (Sized by the rows, n_own/4, it was 18x the blocks
+    ! at 4096 subdomains: 150 MB zeroed per assembly; docs/RESULTS.md "Coarse assembly".)
+    call blocks%init(max(64_ip, 16*this%layout%nlocal))
     do i = 1, con%n_own
       keep = .true.
       if (present(mask)) keep = mask(i)
