@@ -71,7 +71,8 @@ contains
                           rho_window=sp%rho_window, rho_stall=sp%rho_stall, polish_window=sp%polish_window, &
                           polish_rounds=sp%polish_rounds, polish_release=sp%polish_release, &
                           polish_settle=sp%polish_settle, polish_loose=sp%polish_loose, &
-                          polish_predict=sp%polish_predict, polish_first=sp%polish_first, monitor=sp%monitor)
+                          polish_predict=sp%polish_predict, polish_first=sp%polish_first, &
+                          polish_release_share=sp%polish_release_share, monitor=sp%monitor)
   end function smalbe_settings
 
   !> Build the FETI operators and the dual QP of the case `p` on `comm`.

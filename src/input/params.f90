@@ -104,6 +104,9 @@ module params
     real(dp) :: polish_settle = 0.15_dp       !< settled: the active set changed on <= this fraction of contact rows
     real(dp) :: polish_loose = 0.5_dp         !< > 0: face solves check the set at every drop of their residual by this factor
     integer(ip) :: polish_predict = 100       !< > 0: predictive set update from this many projected rows (issue 14, session 9)
+    !> the first release of a polish frees the wrong-sign rows of at least this share of the largest
+    !> wrong-sign gradient (issue 14, session 16; docs/INPUT.md)
+    real(dp) :: polish_release_share = 0.5_dp
     logical :: polish_first = .true.          !< polish before the first outer iteration from every contact row at its bound
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
@@ -520,7 +523,7 @@ contains
                    rho_window, polish_window, polish_rounds, polish_predict
     real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
                 radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, rho_growth, &
-                rho_contraction, rho_stall, coarse_blr, polish_settle, polish_loose, &
+                rho_contraction, rho_stall, coarse_blr, polish_settle, polish_loose, polish_release_share, &
                 regularization, active_tol, kkt_tol, preconditioner_switch
     character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
@@ -535,7 +538,7 @@ contains
     namelist /obstacle/ shape, radius, gap
     namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
       m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, rho_window, rho_stall, polish_window, &
-      polish_rounds, polish_release, polish_settle, polish_loose, polish_predict, polish_first, &
+      polish_rounds, polish_release, polish_settle, polish_loose, polish_predict, polish_release_share, polish_first, &
       power_iterations, coarse, coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, coarse_factor, local_ordering, &
       local_solver, f_action, f_storage, share_subdomains, &
       regularization, scaling, stopping, preconditioner, preconditioner_switch, monitor
@@ -582,6 +585,7 @@ contains
         rho_stall = s%rho_stall; polish_window = s%polish_window
         polish_rounds = s%polish_rounds; polish_release = s%polish_release
         polish_settle = s%polish_settle; polish_loose = s%polish_loose; polish_predict = s%polish_predict
+        polish_release_share = s%polish_release_share
         polish_first = s%polish_first
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
@@ -622,7 +626,7 @@ contains
                                  rho_scale, m_scale, beta, eta_scale, lower(m_no_step), rho_growth, &
                                  rho_contraction, rho_window, rho_stall, polish_window, &
                                  polish_rounds, polish_release, polish_settle, polish_loose, polish_predict, &
-                                 polish_first, power_iterations, lower(coarse), &
+                                 polish_release_share, polish_first, power_iterations, lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
                                  lower(share_subdomains), &
                                  lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, lower(coarse_factor), &
@@ -736,6 +740,9 @@ contains
         call fail('solver', 'polish_loose', 'must be in [0, 1) (0: off)', reals([s%polish_loose]))
       if (s%polish_predict < 0) &
         call fail('solver', 'polish_predict', 'must be >= 0 (0: off)', ints([s%polish_predict]))
+      if (.not. (s%polish_release_share >= 0 .and. s%polish_release_share < 1)) &
+        call fail('solver', 'polish_release_share', 'must be in [0, 1) (0: release every wrong-sign row at once)', &
+                  reals([s%polish_release_share]))
       if (s%power_iterations < 1) &
         call fail('solver', 'power_iterations', 'must be >= 1', ints([s%power_iterations]))
       if (.not. one_of(s%coarse, [character(len=8) :: 'mumps', 'cholesky'])) &

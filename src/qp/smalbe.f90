@@ -84,7 +84,10 @@
 !>    followed by another round stops at its loose check when the set would
 !>    change, face_solve; with polish_predict > 0 a round that projected at
 !>    least that many rows and released none also makes as many of the free
-!>    rows nearest their bound active, predicted_rows). polish_settle > 0: an outer iteration counts as
+!>    rows nearest their bound active, predicted_rows; with polish_release_share
+!>    > 0 the first round of a polish releases only the wrong-sign rows whose
+!>    gradient is at least that share of the largest, released_rows).
+!>    polish_settle > 0: an outer iteration counts as
 !>    settled when the set changed on at most that fraction of the bounded
 !>    rows; a polish given up at its first face then does not count toward
 !>    smalbe_polish_max, and the next waits until the products have doubled.
@@ -122,7 +125,7 @@ module smalbe
                         qp_status_incompatible, qp_status_not_run
   use mprgp, only: mprgp_t, mprgp_stop_t, ensure_size
   use face_solve, only: face_polish_t, free_rows, face_changes
-  use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_Comm_rank, MPI_DOUBLE_PRECISION
+  use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_Comm_rank, MPI_DOUBLE_PRECISION, MPI_IN_PLACE
   implicit none
   private
 
@@ -201,6 +204,10 @@ module smalbe
     !> free rows with the smallest slack x_i - l_i (at most half of them) become active (the next
     !> round's release corrects them); 0: off
     integer(ip) :: polish_predict = 0
+    !> in [0, 1): the first release of a polish (its first round) frees only the active rows whose
+    !> wrong-sign weighted gradient is at least this share of the largest one (issue 14, session 16;
+    !> released_rows); the later rounds release every wrong-sign row. 0: every one at once
+    real(dp) :: polish_release_share = 0
     !> polish before the first outer iteration (issue 14, session 10): from x with every bounded
     !> row at its bound, the polish rounds (release, projection) on that face; only where the
     !> problem knows the equality rows alone to fix it (face_always_regular)
@@ -221,7 +228,7 @@ module smalbe
   !> a face solve whose loose check found no change (a trusted face) may take this many CG steps
   integer(ip), parameter, public :: smalbe_polish_trusted_steps = 500
 
-  public :: polish_cycling, face_signature, predicted_rows
+  public :: polish_cycling, face_signature, predicted_rows, released_rows
 
   !> The SMALBE-M solver with its inner MPRGP. All counters are totals of the
   !> last solve (components, for report.json).
@@ -247,6 +254,7 @@ module smalbe
     real(dp) :: polish_settle = 0              !< settled: active set changes on <= this fraction of bounded rows
     real(dp) :: polish_loose = 0               !< loose check of the face solves (0: off)
     integer(ip) :: polish_predict = 0          !< predictive set update from this many projected rows (0: off)
+    real(dp) :: polish_release_share = 0       !< first release of a polish: this share of the largest and up
     logical :: polish_first = .false.          !< polish before the first outer iteration (start face)
     logical :: polished_first = .false.        !< the last solve started with a polish that was not given up
     integer(ip) :: n_polish_predicted = 0      !< rows made active by the prediction in all
@@ -400,12 +408,12 @@ contains
   subroutine smalbe_init(self, a_norm, tol, max_outer, max_hessian, gamma, alpha_scale, expansion, &
                          m_scale, beta, eta_scale, monitor, m_no_step, rho_growth, rho_contraction, rho_window, &
                          rho_stall, polish_window, polish_rounds, polish_release, polish_settle, polish_loose, &
-                         polish_force_step, polish_predict, polish_first)
+                         polish_force_step, polish_predict, polish_first, polish_release_share)
     class(smalbe_t), intent(inout) :: self
     real(dp), intent(in) :: a_norm, tol
     integer(ip), intent(in) :: max_outer, max_hessian
     real(dp), intent(in), optional :: gamma, alpha_scale, m_scale, beta, eta_scale, rho_growth, rho_contraction, &
-                                      rho_stall, polish_settle, polish_loose
+                                      rho_stall, polish_settle, polish_loose, polish_release_share
     character(len=*), intent(in), optional :: expansion, m_no_step
     logical, intent(in), optional :: monitor, polish_release, polish_force_step, polish_first
     integer(ip), intent(in), optional :: rho_window, polish_window, polish_rounds, polish_predict
@@ -450,6 +458,8 @@ contains
     if (present(polish_predict)) self%polish_predict = polish_predict
     self%polish_first = .false.
     if (present(polish_first)) self%polish_first = polish_first
+    self%polish_release_share = 0
+    if (present(polish_release_share)) self%polish_release_share = polish_release_share
 
     if (.not. (tol > 0 .and. tol < 1)) call fatal_error('smalbe: tol must be in (0, 1)')
     if (max_outer < 1) call fatal_error('smalbe: max_outer must be >= 1')
@@ -474,6 +484,8 @@ contains
     if (.not. (self%polish_loose >= 0 .and. self%polish_loose < 1)) &
       call fatal_error('smalbe: polish_loose must be in [0, 1)')
     if (self%polish_predict < 0) call fatal_error('smalbe: polish_predict must be >= 0')
+    if (.not. (self%polish_release_share >= 0 .and. self%polish_release_share < 1)) &
+      call fatal_error('smalbe: polish_release_share must be in [0, 1)')
   end subroutine smalbe_init
 
   !> The settings `s` at once, with ||A|| = a_norm (penalty included).
@@ -484,7 +496,8 @@ contains
     call self%init(a_norm, s%tol, s%max_outer, s%max_hessian, s%gamma, s%alpha_scale, s%expansion, &
                    s%m_scale, s%beta, s%eta_scale, s%monitor, s%m_no_step, s%rho_growth, s%rho_contraction, &
                    s%rho_window, s%rho_stall, s%polish_window, s%polish_rounds, s%polish_release, &
-                   s%polish_settle, s%polish_loose, s%polish_force_step, s%polish_predict, s%polish_first)
+                   s%polish_settle, s%polish_loose, s%polish_force_step, s%polish_predict, s%polish_first, &
+                   s%polish_release_share)
   end subroutine smalbe_init_with
 
   subroutine smalbe_free(self)
@@ -900,8 +913,9 @@ contains
     real(dp), intent(inout) :: x(:)
     integer(ip), intent(in) :: outer
     logical, intent(out) :: restored      !< the first face solve was given up: x, mu as before
-    integer(ip) :: n, i, budget, budget_trusted, counts(2), rounds, n_changes, prev_changes, n_predicted
-    real(dp) :: wi, change_tol, loose
+    integer(ip) :: n, i, budget, budget_trusted, counts(2), rounds, n_changes, prev_changes, n_predicted, &
+                   n_released
+    real(dp) :: change_tol, loose, share
     logical :: again, cycling, revisited, g_known
     logical, allocatable :: release(:)
     integer(i8), allocatable :: signatures(:, :)
@@ -999,13 +1013,16 @@ contains
         ! the new face: projected rows active, released rows free
         release = .false.
         if (self%polish_release) then
-          do i = 1, n
-            if (problem%lower(i) <= no_lower_bound .or. self%free_now(i)) cycle
-            wi = 1
-            if (allocated(problem%stop_weight)) wi = problem%stop_weight(i)
-            release(i) = wi*self%gradient(i) < -self%tol_gp
-          end do
-          self%n_polish_released = self%n_polish_released + counts(2)
+          ! the first round: only the rows of the strongest wrong sign (polish_release_share)
+          share = 0
+          if (rounds == 1) share = self%polish_release_share
+          n_released = released_rows(problem, self%free_now, self%gradient, self%tol_gp, share, release)
+          self%n_polish_released = self%n_polish_released + n_released
+          if (self%monitor .and. n_released < counts(2)) then
+            write (buf, '(a,i0,a,i0,a,f4.2,a)') 'polish: ', n_released, ' of the ', counts(2), &
+              ' wrong-sign rows released (those of at least ', share, ' times the largest wrong-sign gradient)'
+            call log_message(trim(buf))
+          end if
         end if
         ! predictive update (polish_predict): after a round that projected at least polish_predict
         ! rows and released none, as many more free rows, those nearest their bound, become active
@@ -1056,6 +1073,50 @@ contains
       self%n_polish_hessian = self%n_polish_hessian + 1
     end subroutine fresh_gradient
   end subroutine polish_step
+
+  !> The rows the polish releases: the active bounded rows (not `free`) whose
+  !> weighted gradient w_i g_i (w = stop_weight, 1 without) is below
+  !> -max(tol, share * gmax), gmax the largest -w_i g_i over the active
+  !> bounded rows of all ranks (share = 0: every row with w_i g_i < -tol, the
+  !> primal-dual active set step). `release` (local rows) is set on those rows
+  !> and left alone elsewhere; returns their count over all ranks. Why a share
+  !> (docs/THEORY.md "Damped first release"): from the face of every contact
+  !> row at its bound the wrong-sign rows are those the contact-free solution
+  !> penetrates, a zone larger than the contact zone on smooth obstacles (a
+  !> sphere: twice its area, Hertz); the rows of deepest penetration are in
+  !> contact first. Collective.
+  function released_rows(problem, free, gradient, tol, share, release) result(n_released)
+    class(qp_problem_t), intent(in) :: problem
+    logical, intent(in) :: free(:)
+    real(dp), intent(in) :: gradient(:)
+    real(dp), intent(in) :: tol, share
+    logical, intent(inout) :: release(:)
+    integer(ip) :: n_released, i, local
+    real(dp) :: wi, gmax(1), bound
+    integer :: ierr
+    gmax = 0
+    if (share > 0) then
+      do i = 1, problem%n
+        if (problem%lower(i) <= no_lower_bound .or. free(i)) cycle
+        wi = 1
+        if (allocated(problem%stop_weight)) wi = problem%stop_weight(i)
+        gmax(1) = max(gmax(1), -wi*gradient(i))
+      end do
+      call MPI_Allreduce(MPI_IN_PLACE, gmax, 1, MPI_DOUBLE_PRECISION, MPI_MAX, problem%comm, ierr)
+    end if
+    bound = max(tol, share*gmax(1))
+    local = 0
+    do i = 1, problem%n
+      if (problem%lower(i) <= no_lower_bound .or. free(i)) cycle
+      wi = 1
+      if (allocated(problem%stop_weight)) wi = problem%stop_weight(i)
+      if (wi*gradient(i) < -bound) then
+        release(i) = .true.
+        local = local + 1
+      end if
+    end do
+    call MPI_Allreduce(local, n_released, 1, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
+  end function released_rows
 
   !> The predictive set update of the polish (polish_predict): of the free
   !> bounded rows with x_i >= l_i (not released in this round: `skip`), the k
