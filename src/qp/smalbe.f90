@@ -228,7 +228,7 @@ module smalbe
   !> a face solve whose loose check found no change (a trusted face) may take this many CG steps
   integer(ip), parameter, public :: smalbe_polish_trusted_steps = 500
 
-  public :: polish_cycling, face_signature, predicted_rows, released_rows
+  public :: polish_cycling, face_signature, predicted_rows, released_rows, revisit_of_cut_short
 
   !> The SMALBE-M solver with its inner MPRGP. All counters are totals of the
   !> last solve (components, for report.json).
@@ -916,7 +916,8 @@ contains
     integer(ip) :: n, i, budget, budget_trusted, counts(2), rounds, n_changes, prev_changes, n_predicted, &
                    n_released
     real(dp) :: change_tol, loose, share
-    logical :: again, cycling, revisited, g_known
+    logical :: again, cycling, revisited, g_known, revisit_used
+    logical, allocatable :: cut_short(:)
     logical, allocatable :: release(:)
     integer(i8), allocatable :: signatures(:, :)
     character(len=400) :: buf
@@ -928,7 +929,9 @@ contains
     self%n_polish = self%n_polish + 1
     rounds = 0
     prev_changes = huge(1_ip)
-    allocate (signatures(2, self%polish_rounds + 1))
+    allocate (signatures(2, self%polish_rounds + 1), cut_short(self%polish_rounds + 1))
+    cut_short = .false.
+    revisit_used = .false.
     signatures(:, 1) = face_signature(problem, self%free_now)
     ! without release, the wrong-sign active rows do not change the face (not counted by the loose check)
     change_tol = merge(self%tol_gp, huge(1.0_dp), self%polish_release)
@@ -956,6 +959,7 @@ contains
                            smalbe_polish_target*self%tol_gp, self%per_component, budget, loose, change_tol, &
                            budget_trusted, g_known)
       call problem%face_free()
+      cut_short(rounds) = self%polish%stopped_loose
       self%n_polish_rounds = self%n_polish_rounds + 1
       self%n_hessian = self%n_hessian + self%polish%n_hessian
       self%n_polish_hessian = self%n_polish_hessian + self%polish%n_hessian
@@ -1047,6 +1051,16 @@ contains
         signatures(:, rounds + 1) = face_signature(problem, self%free_now)
         revisited = any(signatures(1, 1:rounds) == signatures(1, rounds + 1) .and. &
                         signatures(2, 1:rounds) == signatures(2, rounds + 1))
+        ! a face whose earlier visit ended at a loose check (its solve cut short, the release made
+        ! from an early iterate) may be visited once more in a polish, to be solved this time
+        if (revisited .and. .not. revisit_used) then
+          revisit_used = revisit_of_cut_short(signatures(:, 1:rounds), cut_short(1:rounds), signatures(:, rounds + 1))
+          if (revisit_used) then
+            revisited = .false.
+            if (self%monitor) call log_message('polish: the next face is that of an earlier round cut short '// &
+                                               'at a loose check: solved once more')
+          end if
+        end if
         ! (the growth test of polish_cycling was made above: here n_changes > 0, only the revisit is new)
         if (revisited) then
           if (self%monitor) call log_message('polish: the next face is that of an earlier round: back to SMALBE')
@@ -1073,6 +1087,17 @@ contains
       self%n_polish_hessian = self%n_polish_hessian + 1
     end subroutine fresh_gradient
   end subroutine polish_step
+
+  !> The next face of a polish (signature `next`) is that of an earlier round
+  !> (signatures(:, 1:r)) whose face solve was cut short at a loose check
+  !> (cut_short(1:r)): its release or projection came from an early iterate,
+  !> so the polish may visit that face once more (polish_step allows one such
+  !> revisit per polish; any other revisit ends the polish).
+  pure logical function revisit_of_cut_short(signatures, cut_short, next) result(yes)
+    integer(i8), intent(in) :: signatures(:, :), next(2)
+    logical, intent(in) :: cut_short(:)
+    yes = any(signatures(1, :) == next(1) .and. signatures(2, :) == next(2) .and. cut_short)
+  end function revisit_of_cut_short
 
   !> The rows the polish releases: the active bounded rows (not `free`) whose
   !> weighted gradient w_i g_i (w = stop_weight, 1 without) is below
