@@ -338,7 +338,9 @@ contains
     class(dual_problem_t), intent(inout) :: self
     logical, intent(in) :: free(:)
     call self%face_free()
+    call timer_start('face: matrices')
     self%face_cp => self%op%masked_coarse(free, low_rank=.true.)
+    call timer_stop('face: matrices')
     self%face_ready = .true.
   end subroutine face_init
 
@@ -348,7 +350,9 @@ contains
     real(dp), intent(in) :: y(:)
     real(dp), intent(out) :: c(:)
     if (.not. self%face_ready) call fatal_error('dual_problem: face_coefficient before face_init')
+    call timer_start('face: solves')
     call active_coarse_solve(self%op, self%face_cp, y, c)
+    call timer_stop('face: solves')
   end subroutine face_coefficient
 
   !> q = P F p / s = A p for p in Ker G (P p = p, Q p = 0): the Hessian

@@ -96,6 +96,8 @@ module mumps_wrapper
     procedure :: set_block_size
     procedure :: set_schur
     procedure :: schur_complement
+    procedure :: solve_condense
+    procedure :: solve_expand
     procedure :: set_low_rank
     procedure :: set_out_of_core
     procedure :: factorize
@@ -271,27 +273,75 @@ contains
   end subroutine set_block_size
 
   !> Ask the next factorization for the Schur complement on the variables
-  !> `vars` (ICNTL(19) = 1, centralized; one rank only, MPI_COMM_SELF): the
-  !> other variables are eliminated, `vars` are not factorized, and
-  !> `schur_complement` returns S = A_vv - A_vi A_ii^{-1} A_iv. Needs fewer
-  !> variables than the order. Call after set_centralized.
+  !> `vars` (ICNTL(19) = 1, centralized on the host): the other variables are
+  !> eliminated, `vars` are not factorized, and `schur_complement` returns
+  !> S = A_vv - A_vi A_ii^{-1} A_iv on the host. Only the host's `vars` are
+  !> read (other ranks may pass an empty array). Needs fewer variables than
+  !> the order. Call after set_centralized or set_distributed.
   subroutine set_schur(this, vars)
     class(mumps_t), intent(inout) :: this
     integer(ip), intent(in) :: vars(:)
     integer :: m
     call require_active(this, 'set_schur')
-    if (this%nranks /= 1) call fatal_error('mumps_wrapper: set_schur: one rank only')
-    m = size(vars)
-    if (m < 1 .or. m >= this%n) call fatal_error('mumps_wrapper: set_schur: needs 1 <= size(vars) < n')
     if (associated(this%schur_vars)) deallocate (this%schur_vars)
     if (associated(this%schur)) deallocate (this%schur)
+    this%id%ICNTL(19) = 1
+    if (this%rank /= 0) return
+    m = size(vars)
+    if (m < 1 .or. m >= this%n) call fatal_error('mumps_wrapper: set_schur: needs 1 <= size(vars) < n')
     allocate (this%schur_vars, source=vars)
     allocate (this%schur(int(m, i8)*m))
-    this%id%ICNTL(19) = 1
     this%id%SIZE_SCHUR = m
     this%id%LISTVAR_SCHUR => this%schur_vars
     this%id%SCHUR => this%schur
   end subroutine set_schur
+
+  !> Condensation (ICNTL(26) = 1) of one right-hand side `x` (n, host) onto
+  !> the Schur variables: `reduced` (host, the size of the Schur list) gets
+  !> the reduced right-hand side b_v - A_vi A_ii^{-1} b_i; MUMPS keeps the
+  !> forward elimination for `solve_expand`. Collective.
+  subroutine solve_condense(this, x, reduced)
+    class(mumps_t), intent(inout) :: this
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(inout), target, contiguous :: reduced(:)
+    call schur_solve_step(this, x, reduced, 1)
+  end subroutine solve_condense
+
+  !> Expansion (ICNTL(26) = 2) after solve_condense: `reduced` (host) holds
+  !> the solution on the Schur variables; `x` (n, host) gets the whole
+  !> solution. Collective.
+  subroutine solve_expand(this, x, reduced)
+    class(mumps_t), intent(inout) :: this
+    real(dp), intent(inout) :: x(:)
+    real(dp), intent(inout), target, contiguous :: reduced(:)
+    call schur_solve_step(this, x, reduced, 2)
+    if (this%rank == 0) x = this%rhs(1:this%n)
+  end subroutine solve_expand
+
+  subroutine schur_solve_step(this, x, reduced, step)
+    class(mumps_t), intent(inout) :: this
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(inout), target, contiguous :: reduced(:)
+    integer, intent(in) :: step
+    integer :: n
+    if (.not. (this%factorized .and. this%id%ICNTL(19) /= 0)) &
+      call fatal_error('mumps_wrapper: Schur solve steps need a factorization with set_schur')
+    n = this%n
+    if (this%rank == 0) then
+      if (size(reduced) /= size(this%schur_vars)) &
+        call fatal_error('mumps_wrapper: Schur solve steps: reduced must have the size of the Schur list')
+      call reserve_rhs(this, int(n, i8))
+      if (step == 1) this%rhs(1:n) = x(1:n)
+      this%id%NRHS = 1
+      this%id%LRHS = n
+      this%id%REDRHS => reduced
+      this%id%LREDRHS = size(reduced)
+    end if
+    this%id%ICNTL(26) = step
+    call run(this, job_solve, 'solve')
+    this%id%ICNTL(26) = 0
+    if (this%rank == 0) nullify (this%id%REDRHS)
+  end subroutine schur_solve_step
 
   !> The Schur complement of the last factorization with set_schur, as a
   !> full (m x m) matrix in the order of `vars`.
@@ -614,7 +664,7 @@ contains
   subroutine nullify_user_arrays(id)
     type(DMUMPS_STRUC), intent(inout) :: id
     nullify (id%IRN, id%JCN, id%A, id%IRN_loc, id%JCN_loc, id%A_loc, id%PERM_IN, id%RHS)
-    nullify (id%LISTVAR_SCHUR, id%SCHUR)
+    nullify (id%LISTVAR_SCHUR, id%SCHUR, id%REDRHS)
   end subroutine nullify_user_arrays
 
   !> A MUMPS count: negative values are millions.

@@ -47,13 +47,14 @@ module coarse_problem
   use metis_wrapper, only: metis_node_nd
   use constraints, only: constraints_t
   use mumps_wrapper, only: mumps_t
+  use coarse_schur, only: coarse_schur_t, schur_factor_t
   use block_hash, only: block_hash_t
   use errors, only: fatal_error
   use timers, only: timer_start, timer_stop
   use lapack_interfaces, only: dpotrf, dpotrs, dtrsv, dgemm, dgemv
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gatherv, MPI_Scatterv, MPI_Wtime, &
                      MPI_Allgatherv, MPI_Isend, MPI_Irecv, MPI_Waitall, MPI_Request, MPI_STATUSES_IGNORE, &
-                     MPI_INTEGER, MPI_Comm_split, &
+                     MPI_INTEGER, MPI_INTEGER8, MPI_Allgather, MPI_Comm_split, &
                      MPI_Comm_free, MPI_COMM_NULL, MPI_UNDEFINED, MPI_IN_PLACE, &
                      MPI_Comm_split_type, MPI_COMM_TYPE_SHARED, MPI_INFO_NULL, MPI_Allreduce, MPI_MIN, MPI_SUM, &
                      operator(/=)
@@ -139,6 +140,14 @@ module coarse_problem
     integer :: group_length = 0             !< coarse entries of the group's ranks
     integer, allocatable :: gcounts(:), gdispls(:)  !< per member: entries, offsets in the group part
     integer, allocatable :: rcounts(:), rdispls(:)  !< per group: entries, global offsets (roots)
+    !> Schur mode (init with schur_positions; see coarse_schur): MUMPS leaves the
+    !> coarse rows of the contact-face subdomains uneliminated; the group's host
+    !> keeps their Schur complement and the Cholesky factor `sfac` solved with
+    type(coarse_schur_t) :: schur
+    type(schur_factor_t) :: sfac
+    real(dp), allocatable :: red(:)         !< host: the reduced right-hand side
+    !> a face view (make_view): solves with the factors of view_of and its own sfac
+    type(coarse_problem_t), pointer :: view_of => null()
   contains
     procedure :: init
     procedure :: refactorize
@@ -160,6 +169,9 @@ module coarse_problem
     procedure :: factor_entries_effective
     procedure :: mumps_memory_mb
     procedure :: is_dense
+    procedure :: has_schur
+    procedure :: schur_rows
+    procedure :: make_view
     procedure :: free
   end type coarse_problem_t
 
@@ -209,7 +221,7 @@ contains
   !> `mask` give explicit zeros) and keep it, so that `refactorize` can
   !> factorize G_M G_M^T for another mask M with MUMPS's numerical phase alone
   !> (the analysis of this init is reused).
-  subroutine init(this, dec, con, layout, comm, mask, options, reusable)
+  subroutine init(this, dec, con, layout, comm, mask, options, reusable, schur_positions)
     class(coarse_problem_t), intent(inout) :: this
     type(decomposition_t), intent(in) :: dec
     type(constraints_t), intent(inout) :: con
@@ -218,6 +230,7 @@ contains
     logical, intent(in), optional :: mask(:)
     type(coarse_options_t), intent(in), optional :: options
     logical, intent(in), optional :: reusable
+    integer(ip), intent(in), optional :: schur_positions(:)
     type(coarse_options_t) :: opt
     integer(ip), allocatable :: perm(:)
     integer(ip), allocatable :: irn(:), jcn(:)
@@ -262,13 +275,16 @@ contains
     ! the pivot order: only the host of each group's instance reads it
     call timer_start('coarse: ordering')
     t0 = MPI_Wtime()
+    if (present(schur_positions)) call this%schur%init(layout%nsub, schur_positions)
     if (this%group_rank == 0) then
       perm = coarse_ordering(dec, layout)
+      if (this%schur%m > 0) call schur_last(perm, this%schur%vars)
     else
       allocate (perm(0))
     end if
     call this%mumps%set_ordering('metis', perm)
     deallocate (perm)
+    if (this%schur%m > 0) call this%mumps%set_schur(this%schur%vars)
     this%seconds_phase(2) = MPI_Wtime() - t0
     call timer_stop('coarse: ordering')
     if (opt%blr > 0) call this%mumps%set_low_rank(opt%blr)
@@ -276,6 +292,7 @@ contains
     call timer_start('coarse: factorization')
     call this%mumps%factorize(keep_pattern=this%reusable)
     call timer_stop('coarse: factorization')
+    if (this%schur%m > 0) call take_schur(this)
     this%seconds_phase(3:4) = this%mumps%phase_seconds()
     this%seconds_factorization = sum(this%seconds_phase(3:4))
     this%factorized = .true.
@@ -285,6 +302,123 @@ contains
       allocate (this%rhs(1, 1))
     end if
   end subroutine init
+
+  !> The host keeps MUMPS's Schur complement S and factorizes it (the factor
+  !> G G^T's own solves use). Inside the 'coarse: factorization' timer.
+  subroutine take_schur(this)
+    class(coarse_problem_t), intent(inout) :: this
+    real(dp) :: t0
+    call timer_start('coarse: factorization')
+    t0 = MPI_Wtime()
+    if (this%group_rank == 0) then
+      allocate (this%schur%s(this%schur%m, this%schur%m), this%red(this%schur%m))
+      call this%mumps%schur_complement(this%schur%s)
+      call this%sfac%factor(this%schur%s, 'G G^T')
+    else
+      allocate (this%red(0))
+    end if
+    this%sfac%seconds = MPI_Wtime() - t0
+    call timer_stop('coarse: factorization')
+  end subroutine take_schur
+
+  !> Move the pivot positions of `vars` (global rows, ascending) to the end
+  !> of the order `perm` (perm(row) = position), the others keeping theirs in
+  !> sequence: MUMPS keeps Schur variables last.
+  subroutine schur_last(perm, vars)
+    integer(ip), intent(inout) :: perm(:)
+    integer(ip), intent(in) :: vars(:)
+    integer(ip), allocatable :: row_at(:)
+    logical, allocatable :: is_schur(:)
+    integer(ip) :: n, p, next, row
+    n = size(perm, kind=ip)
+    allocate (row_at(n), is_schur(n))
+    is_schur = .false.
+    is_schur(vars) = .true.
+    do row = 1, n
+      row_at(perm(row)) = row
+    end do
+    next = 0
+    do p = 1, n
+      row = row_at(p)
+      if (is_schur(row)) cycle
+      next = next + 1
+      perm(row) = next
+    end do
+    do p = 1, size(vars, kind=ip)
+      perm(vars(p)) = next + p
+    end do
+  end subroutine schur_last
+
+  !> This instance becomes a view of `parent` (an init with schur_positions):
+  !> it solves with G_M G_M^T = G G^T - D, D = sum over the rows r given of
+  !> (G e_r)(G e_r)^T, from parent's MUMPS factors and a dense factor of S - D
+  !> of its own. The rows come as pieces: on this rank, piece p is the part
+  !> g(:, p) of G e_r on the subdomain at coarse position pos(p), keys(p)
+  !> naming the row (the same on every rank). Every row must touch only
+  !> subdomains with Schur rows. Collective.
+  subroutine make_view(this, parent, keys, pos, g)
+    class(coarse_problem_t), intent(inout) :: this
+    type(coarse_problem_t), intent(in), target :: parent
+    integer(i8), intent(in) :: keys(:)
+    integer(ip), intent(in) :: pos(:)
+    real(dp), intent(in) :: g(:, :)
+    integer(i8), allocatable :: all_keys(:)
+    integer(ip), allocatable :: all_pos(:)
+    real(dp), allocatable :: all_g(:, :)
+    integer, allocatable :: counts(:), displs(:)
+    integer :: nranks, ierr, r, nmine, total
+    real(dp) :: t0
+    if (parent%schur%m == 0) call fatal_error('coarse_problem: make_view of an instance without Schur rows')
+    call this%free()
+    this%view_of => parent
+    call timer_start('coarse: assembly')
+    call MPI_Comm_size(parent%comm, nranks, ierr)
+    allocate (counts(nranks), displs(nranks))
+    nmine = size(keys)
+    call MPI_Allgather(nmine, 1, MPI_INTEGER, counts, 1, MPI_INTEGER, parent%comm, ierr)
+    displs(1) = 0
+    do r = 2, nranks
+      displs(r) = displs(r - 1) + counts(r - 1)
+    end do
+    total = sum(counts)
+    allocate (all_keys(total), all_pos(total), all_g(6, total))
+    call MPI_Allgatherv(keys, nmine, MPI_INTEGER8, all_keys, counts, displs, MPI_INTEGER8, parent%comm, ierr)
+    call MPI_Allgatherv(pos, nmine, MPI_INT_IP, all_pos, counts, displs, MPI_INT_IP, parent%comm, ierr)
+    call MPI_Allgatherv(g, 6*nmine, MPI_REAL_DP, all_g, 6*counts, 6*displs, MPI_REAL_DP, parent%comm, ierr)
+    call timer_stop('coarse: assembly')
+    call timer_start('coarse: factorization')
+    t0 = MPI_Wtime()
+    if (parent%group_rank == 0) call parent%schur%downdated_factor(all_keys, all_pos, all_g, this%sfac)
+    this%sfac%seconds = MPI_Wtime() - t0
+    this%seconds_factorization = this%sfac%seconds
+    call timer_stop('coarse: factorization')
+    this%factorized = .true.
+  end subroutine make_view
+
+  !> x = A^{-1} b in Schur mode, A given by the dense factor `fac` of its
+  !> Schur complement (this instance's MUMPS factors). Collective.
+  subroutine solve_schur(this, fac, b, x)
+    class(coarse_problem_t), intent(inout) :: this
+    type(schur_factor_t), intent(in) :: fac
+    real(dp), intent(in) :: b(:)
+    real(dp), intent(out) :: x(:)
+    call gather_column(this, b, this%rhs(:, 1))
+    call this%mumps%solve_condense(this%rhs(:, 1), this%red)
+    if (this%group_rank == 0) call fac%solve(this%red)
+    call this%mumps%solve_expand(this%rhs(:, 1), this%red)
+    call scatter_column(this, this%rhs(:, 1), x)
+  end subroutine solve_schur
+
+  logical function has_schur(this)
+    class(coarse_problem_t), intent(in) :: this
+    has_schur = this%schur%m > 0
+  end function has_schur
+
+  !> Rows kept for the Schur complement (0 without Schur mode).
+  integer(ip) function schur_rows(this)
+    class(coarse_problem_t), intent(in) :: this
+    schur_rows = this%schur%m
+  end function schur_rows
 
   !> G_M G_M^T for the rows of `mask` (all rows without it), factorized anew
   !> on the pattern and with the analysis of an init(reusable=.true.): the
@@ -566,6 +700,10 @@ contains
     real(dp), intent(out) :: x(:)
     real(dp), allocatable :: t(:)
     integer :: nmine, ierr
+    if (associated(this%view_of)) then
+      call solve_schur(this%view_of, this%sfac, b, x)
+      return
+    end if
     call this%solve_base(b, x)
     if (this%upd_k == 0) return
     nmine = 6*this%layout%nlocal
@@ -589,6 +727,12 @@ contains
     integer :: m, j
     m = size(b, 2)
     if (m == 0) return
+    if (this%schur%m > 0) then
+      do j = 1, m
+        call solve_schur(this, this%sfac, b(:, j), x(:, j))
+      end do
+      return
+    end if
     if (this%group_rank == 0) then
       allocate (rhs(this%n, m))
     else
@@ -727,6 +871,10 @@ contains
     class(coarse_problem_t), intent(inout) :: this
     real(dp), intent(in) :: b(:)
     real(dp), intent(out) :: x(:)
+    if (this%schur%m > 0) then
+      call solve_schur(this, this%sfac, b, x)
+      return
+    end if
     call gather_column(this, b, this%rhs(:, 1))
     if (this%dense) then
       call dense_solve(this, this%rhs)
@@ -1043,6 +1191,15 @@ contains
   subroutine free(this)
     class(coarse_problem_t), intent(inout) :: this
     integer :: ierr
+    if (associated(this%view_of)) then
+      this%view_of => null()
+      this%factorized = .false.
+      if (allocated(this%sfac%l)) deallocate (this%sfac%l)
+      return
+    end if
+    call this%schur%free()
+    if (allocated(this%sfac%l)) deallocate (this%sfac%l)
+    if (allocated(this%red)) deallocate (this%red)
     if (this%factorized .and. .not. this%dense) call this%mumps%free()
     if (allocated(this%ufac)) deallocate (this%ufac)
     this%dense = .false.

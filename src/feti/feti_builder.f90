@@ -146,7 +146,7 @@ contains
 
     call timer_start('coarse setup')
     call dirichlet_rigid_test(this)
-    call this%proj%init(this%dec, this%b, comm, p%solver)
+    call this%proj%init(this%dec, this%b, comm, p%solver, this%dirichlet_holds)
     call timer_stop('coarse setup')
     call memory_mark('coarse setup')
 

@@ -9,7 +9,8 @@ module projector
   use decomposition, only: decomposition_t
   use constraints, only: constraints_t, row_contact
   use coarse_problem, only: coarse_problem_t, coarse_layout_t, build_coarse_layout, coarse_options_t, &
-                            choose_coarse_ranks, ranks_per_node
+                            choose_coarse_ranks, ranks_per_node, dense_for
+  use sorting, only: sort_ints
   use params, only: solver_params_t
   use errors, only: collective_error, exit_input_error
   use logger, only: log_message
@@ -22,6 +23,7 @@ module projector
 
   integer, parameter :: masked_base = 1          !< G_E G_E^T, the base of low-rank updates
   integer, parameter :: masked_refactorized = 2  !< G_M G_M^T of the last mask
+  integer, parameter :: masked_view = 3          !< a Schur view of the coarse problem (coarse_schur)
 
   type, public :: projector_t
     private
@@ -53,13 +55,15 @@ contains
   !> coarse_placement; BLR and out-of-core by coarse_blr, coarse_ooc). A
   !> value that cannot be used on this many ranks stops every rank with an
   !> input error. Collective.
-  subroutine init(this, dec, b, comm, s)
+  subroutine init(this, dec, b, comm, s, regular_base)
     class(projector_t), intent(inout) :: this
     type(decomposition_t), intent(in) :: dec
     type(b_operator_t), intent(inout), target :: b
     type(MPI_Comm), intent(in) :: comm
     type(solver_params_t), intent(in) :: s
+    logical, intent(in) :: regular_base
     type(constraints_t), pointer :: con
+    integer(ip), allocatable :: schur_positions(:)
     integer :: nranks, ierr, c
     character(len=300) :: msg
     call this%free()
@@ -73,7 +77,12 @@ contains
     this%options = coarse_options_t(c, s%coarse_blr, s%coarse_ooc, s%coarse_factor)
     con => b%constraints()
     call build_coarse_layout(dec, comm, this%layout)
-    call this%coarse%init(dec, con, this%layout, comm, options=this%options)
+    schur_positions = contact_face_positions(this, dec, con, regular_base)
+    if (size(schur_positions) > 0) then
+      call this%coarse%init(dec, con, this%layout, comm, options=this%options, schur_positions=schur_positions)
+    else
+      call this%coarse%init(dec, con, this%layout, comm, options=this%options)
+    end if
     associate (mb => this%coarse%mumps_memory_mb())
       if (this%coarse%is_dense()) then
         write (msg, '(a,i0,a,i0,3a,i0,a)') 'coarse problem: dimension ', 6*dec%nsubdomains, ', ', &
@@ -88,6 +97,11 @@ contains
       end if
     end associate
     call log_message(msg)
+    if (this%coarse%has_schur()) then
+      write (msg, '(a,i0,a)') 'coarse problem: the ', this%coarse%schur_rows(), ' rows of the subdomains '// &
+        'under contact kept as a dense Schur complement (face matrices without a second factorization)'
+      call log_message(msg)
+    end if
     allocate (this%cwork(6*this%layout%nlocal), this%cwork2(6*this%layout%nlocal))
   end subroutine init
 
@@ -183,7 +197,10 @@ contains
     if (present(force_low_rank)) cheap = cheap .or. force_low_rank
     ! one decision on every rank (each coarse group has its own MUMPS figures)
     call MPI_Allreduce(MPI_IN_PLACE, cheap, 1, MPI_LOGICAL, MPI_LAND, this%comm, ierr)
-    if (low_rank .and. regular_base .and. total(2) == 0 .and. cheap) then
+    if (this%coarse%has_schur() .and. regular_base .and. total(2) == 0) then
+      call schur_view(this, dec, con, mask, contact)
+      this%masked_mode = masked_view
+    else if (low_rank .and. regular_base .and. total(2) == 0 .and. cheap) then
       if (this%masked_mode /= masked_base) then
         if (this%masked%is_reusable()) then
           call this%masked%refactorize(dec, con, .not. contact)
@@ -227,7 +244,9 @@ contains
           end do
         end associate
       end do
+      call timer_start('face: update')
       call this%masked%set_update(v, keys)
+      call timer_stop('face: update')
     else
       if (this%masked%is_reusable()) then
         call this%masked%refactorize(dec, con, mask)
@@ -256,6 +275,106 @@ contains
       call MPI_Allgatherv(mine, n_mine, MPI_INTEGER8, all, counts, displs, MPI_INTEGER8, this%comm, ierr)
     end function gather_keys
   end function masked_coarse
+
+  !> The coarse positions (ascending, the same on every rank) of the
+  !> subdomains that contact rows touch, when the coarse problem should keep
+  !> their rows as a Schur complement (coarse_schur): MUMPS factors, the
+  !> equality rows alone fixing every rigid body motion (the face matrices
+  !> are then positive definite), and at most a quarter of the subdomains
+  !> under contact. Otherwise none. Collective.
+  function contact_face_positions(this, dec, con, regular_base) result(positions)
+    class(projector_t), intent(in) :: this
+    type(decomposition_t), intent(in) :: dec
+    type(constraints_t), intent(inout) :: con
+    logical, intent(in) :: regular_base
+    integer(ip), allocatable :: positions(:)
+    real(dp), allocatable :: col(:), wloc(:)
+    integer(ip), allocatable :: mine(:)
+    integer(ip) :: ls, e, n_mine, n
+    integer, allocatable :: counts(:), displs(:)
+    integer :: nranks, ierr, r, cnt
+    logical :: touched
+    allocate (positions(0))
+    if (.not. regular_base .or. con%n_contact_global == 0) return
+    if (dense_for(this%options%factor, 6*this%layout%nsub, this%options%ranks_per_group)) return
+    allocate (col(con%n_own), wloc(con%n_local))
+    col = merge(1.0_dp, 0.0_dp, con%kind(1:con%n_own) == row_contact)
+    call con%exchange%gather(col, wloc)
+    allocate (mine(size(con%b)))
+    n_mine = 0
+    do ls = 1, size(con%b, kind=ip)
+      touched = .false.
+      do e = 1, con%b(ls)%nentries
+        if (wloc(con%b(ls)%row(e)) > 0) touched = .true.
+      end do
+      if (touched) then
+        n_mine = n_mine + 1
+        mine(n_mine) = this%layout%position(dec%local_subdomains(ls))
+      end if
+    end do
+    call MPI_Comm_size(this%comm, nranks, ierr)
+    allocate (counts(nranks), displs(nranks))
+    cnt = int(n_mine)
+    call MPI_Allgather(cnt, 1, MPI_INTEGER, counts, 1, MPI_INTEGER, this%comm, ierr)
+    displs(1) = 0
+    do r = 2, nranks
+      displs(r) = displs(r - 1) + counts(r - 1)
+    end do
+    n = sum(counts)
+    if (4*n > this%layout%nsub) return
+    deallocate (positions)
+    allocate (positions(n))
+    call MPI_Allgatherv(mine(1:n_mine), cnt, MPI_INT_IP, positions, counts, displs, MPI_INT_IP, this%comm, ierr)
+    call sort_ints(positions)
+  end function contact_face_positions
+
+  !> masked holds G_M G_M^T as a view of the coarse problem's Schur factors:
+  !> every row outside the mask is a contact row. Collective.
+  subroutine schur_view(this, dec, con, mask, contact)
+    class(projector_t), intent(inout) :: this
+    type(decomposition_t), intent(in) :: dec
+    type(constraints_t), intent(inout) :: con
+    logical, intent(in) :: mask(:), contact(:)
+    real(dp), allocatable :: col(:), wloc(:), g(:, :)
+    integer(i8), allocatable :: keys(:)
+    integer(ip), allocatable :: pos(:)
+    integer(ip) :: ls, e, i, c, c_offset, np
+    integer :: rank, ierr
+    ! the global ordinal of each contact row outside the mask (rank, then row), on every copy
+    c = count(contact, kind=ip)
+    c_offset = 0
+    call MPI_Exscan(c, c_offset, 1, MPI_INT_IP, MPI_SUM, this%comm, ierr)
+    call MPI_Comm_rank(this%comm, rank, ierr)
+    if (rank == 0) c_offset = 0
+    allocate (col(con%n_own), wloc(con%n_local))
+    col = 0
+    c = c_offset
+    do i = 1, con%n_own
+      if (.not. contact(i)) cycle
+      c = c + 1
+      if (.not. mask(i)) col(i) = real(c, dp)
+    end do
+    call con%exchange%gather(col, wloc)
+    np = 0
+    do ls = 1, size(con%b, kind=ip)
+      np = np + count(nint(wloc(con%b(ls)%row(1:con%b(ls)%nentries)), ip) > 0, kind=ip)
+    end do
+    allocate (keys(np), pos(np), g(6, np))
+    np = 0
+    do ls = 1, size(con%b, kind=ip)
+      associate (bs => con%b(ls))
+        do e = 1, bs%nentries
+          c = nint(wloc(bs%row(e)), ip)
+          if (c <= 0) cycle
+          np = np + 1
+          keys(np) = int(c, i8)
+          pos(np) = this%layout%position(dec%local_subdomains(ls))
+          g(:, np) = bs%g(:, e)
+        end do
+      end associate
+    end do
+    call this%masked%make_view(this%coarse, keys, pos, g)
+  end subroutine schur_view
 
   !> The explicit G~ = L^{-1} G of `&solver coarse = 'cholesky'`. Collective.
   subroutine init_orthonormal(this, dec, b, orth)

@@ -1,0 +1,148 @@
+!> The dense part of the coarse problem's Schur mode (coarse_problem, init
+!> with `schur_positions`).
+!>
+!> Contact rows touch only the coarse rows of the subdomains on the contact
+!> face. Every face matrix G_M G_M^T of the polish and the G_A G_A^T of the
+!> standard reconstruction differs from G G^T only there:
+!>   G_M G_M^T = G G^T - sum over the contact rows r outside M of (G e_r)(G e_r)^T.
+!> MUMPS eliminates every other coarse row once (the Schur complement S of
+!> G G^T on the m contact-face rows); a face then costs the dense S - D_M
+!> and its Cholesky factor (m^3/3 flops), and each solve a condensation, two
+!> dense triangular solves and an expansion: no second sparse factorization,
+!> no low-rank update solves.
+!>
+!> This module holds what the host of a coarse group keeps: S, the map from
+!> coarse positions to Schur slots, and Cholesky factors of S - D. The
+!> contributions (G e_r restricted to one subdomain: 6 values) arrive as
+!> "pieces" keyed by their row, from every rank.
+module coarse_schur
+  use kinds, only: dp, ip, i8
+  use errors, only: fatal_error
+  use sorting, only: sort_permutation
+  use lapack_interfaces, only: dpotrf, dpotrs
+  implicit none
+  private
+
+  type, public :: coarse_schur_t
+    integer(ip) :: m = 0                      !< Schur rows: 6 per contact-face subdomain
+    !> coarse position -> offset of its 6 rows in the Schur order (-1: eliminated)
+    integer(ip), allocatable :: slot(:)
+    integer(ip), allocatable :: vars(:)       !< the Schur rows as global coarse rows, ascending
+    real(dp), allocatable :: s(:, :)          !< host: the Schur complement of G G^T (full, symmetric)
+  contains
+    procedure :: init
+    procedure :: downdated_factor
+    procedure :: free
+  end type coarse_schur_t
+
+  !> A lower Cholesky factor of an m x m Schur matrix (on a group's host).
+  type, public :: schur_factor_t
+    integer(ip) :: m = 0
+    real(dp), allocatable :: l(:, :)
+    real(dp) :: seconds = 0                   !< forming and factorizing it
+  contains
+    procedure :: factor
+    procedure :: solve
+  end type schur_factor_t
+
+contains
+
+  !> The Schur rows for the subdomains at coarse `positions` (ascending,
+  !> among `nsub`).
+  subroutine init(this, nsub, positions)
+    class(coarse_schur_t), intent(inout) :: this
+    integer(ip), intent(in) :: nsub
+    integer(ip), intent(in) :: positions(:)
+    integer(ip) :: j, k
+    call this%free()
+    this%m = 6*size(positions, kind=ip)
+    allocate (this%slot(nsub), this%vars(this%m))
+    this%slot = -1
+    do j = 1, size(positions, kind=ip)
+      if (j > 1) then
+        if (positions(j) <= positions(j - 1)) call fatal_error('coarse_schur: positions must ascend')
+      end if
+      this%slot(positions(j)) = 6*(j - 1)
+      do k = 1, 6
+        this%vars(6*(j - 1) + k) = 6*(positions(j) - 1) + k
+      end do
+    end do
+  end subroutine init
+
+  !> fac = Cholesky factor of S - D, D = sum over rows of v_r v_r^T, v_r the
+  !> sum of the pieces of row r: piece p adds g(:, p) at the 6 Schur rows of
+  !> coarse position pos(p). Host only.
+  subroutine downdated_factor(this, keys, pos, g, fac)
+    class(coarse_schur_t), intent(in) :: this
+    integer(i8), intent(in) :: keys(:)
+    integer(ip), intent(in) :: pos(:)
+    real(dp), intent(in) :: g(:, :)
+    type(schur_factor_t), intent(inout) :: fac
+    real(dp), allocatable :: a(:, :)
+    integer(ip), allocatable :: perm(:)
+    integer(ip) :: first, last, p, q, sp, sq, np
+    integer :: i, j
+    a = this%s
+    np = size(keys, kind=ip)
+    call sort_permutation(keys, perm)
+    first = 1
+    do while (first <= np)
+      last = first
+      do while (last < np)
+        if (keys(perm(last + 1)) /= keys(perm(first))) exit
+        last = last + 1
+      end do
+      ! every pair of pieces of one row (the row's copies on several subdomains)
+      do p = first, last
+        sp = this%slot(pos(perm(p)))
+        if (sp < 0) call fatal_error('coarse_schur: a contact row touches a subdomain without Schur rows')
+        do q = first, last
+          sq = this%slot(pos(perm(q)))
+          if (sq < 0) call fatal_error('coarse_schur: a contact row touches a subdomain without Schur rows')
+          do j = 1, 6
+            do i = 1, 6
+              a(sp + i, sq + j) = a(sp + i, sq + j) - g(i, perm(p))*g(j, perm(q))
+            end do
+          end do
+        end do
+      end do
+      first = last + 1
+    end do
+    call fac%factor(a, 'a face matrix of the polish or the standard reconstruction')
+  end subroutine downdated_factor
+
+  !> l = Cholesky factor of the symmetric positive definite `a` (its lower
+  !> triangle is read); `what` names the matrix in the error message.
+  subroutine factor(this, a, what)
+    class(schur_factor_t), intent(inout) :: this
+    real(dp), intent(in) :: a(:, :)
+    character(len=*), intent(in) :: what
+    integer :: info
+    character(len=240) :: msg
+    this%m = size(a, 1, kind=ip)
+    this%l = a
+    call dpotrf('L', int(this%m), this%l, int(this%m), info)
+    if (info /= 0) then
+      write (msg, '(3a,i0,a,i0,a)') 'coarse_schur: the Cholesky factorization of the Schur complement of ', &
+        what, ' (dimension ', this%m, ') failed at pivot ', info, ': it is not positive definite'
+      call fatal_error(trim(msg))
+    end if
+  end subroutine factor
+
+  !> r <- A^{-1} r with the factor.
+  subroutine solve(this, r)
+    class(schur_factor_t), intent(in) :: this
+    real(dp), intent(inout) :: r(:)
+    integer :: info
+    call dpotrs('L', int(this%m), 1, this%l, int(this%m), r, int(this%m), info)
+    if (info /= 0) call fatal_error('coarse_schur: LAPACK dpotrs failed')
+  end subroutine solve
+
+  subroutine free(this)
+    class(coarse_schur_t), intent(inout) :: this
+    this%m = 0
+    if (allocated(this%slot)) deallocate (this%slot)
+    if (allocated(this%vars)) deallocate (this%vars)
+    if (allocated(this%s)) deallocate (this%s)
+  end subroutine free
+end module coarse_schur
