@@ -146,6 +146,8 @@ module coarse_problem
     type(coarse_schur_t) :: schur
     type(schur_factor_t) :: sfac
     real(dp), allocatable :: red(:)         !< host: the reduced right-hand side
+    !> (2, k): local subdomain and coarse position of this rank's rotated subdomains
+    integer(ip), allocatable :: rotated(:, :)
     !> a face view (make_view): solves with the factors of view_of and its own sfac
     type(coarse_problem_t), pointer :: view_of => null()
   contains
@@ -172,6 +174,7 @@ module coarse_problem
     procedure :: has_schur
     procedure :: schur_rows
     procedure :: make_view
+    procedure :: make_alias
     procedure :: free
   end type coarse_problem_t
 
@@ -221,7 +224,7 @@ contains
   !> `mask` give explicit zeros) and keep it, so that `refactorize` can
   !> factorize G_M G_M^T for another mask M with MUMPS's numerical phase alone
   !> (the analysis of this init is reused).
-  subroutine init(this, dec, con, layout, comm, mask, options, reusable, schur_positions)
+  subroutine init(this, dec, con, layout, comm, mask, options, reusable, schur_positions, schur_gram)
     class(coarse_problem_t), intent(inout) :: this
     type(decomposition_t), intent(in) :: dec
     type(constraints_t), intent(inout) :: con
@@ -231,6 +234,7 @@ contains
     type(coarse_options_t), intent(in), optional :: options
     logical, intent(in), optional :: reusable
     integer(ip), intent(in), optional :: schur_positions(:)
+    real(dp), intent(in), optional :: schur_gram(:, :, :)
     type(coarse_options_t) :: opt
     integer(ip), allocatable :: perm(:)
     integer(ip), allocatable :: irn(:), jcn(:)
@@ -249,6 +253,11 @@ contains
     if (present(reusable)) this%reusable = reusable
     call make_groups(this, opt%ranks_per_group)
 
+    this%dense = dense_for(opt%factor, this%n, this%group_size)
+    if (present(schur_positions) .and. .not. this%dense) then
+      call this%schur%init(layout%nsub, schur_positions, schur_gram)
+      call local_rotations(this, dec)
+    end if
     call timer_start('coarse: assembly')
     t0 = MPI_Wtime()
     call assemble(this, dec, con, mask, this%reusable, irn, jcn, a)
@@ -257,7 +266,6 @@ contains
     this%seconds_phase = 0
     this%seconds_phase(1) = MPI_Wtime() - t0
     call timer_stop('coarse: assembly')
-    this%dense = dense_for(opt%factor, this%n, this%group_size)
     if (this%dense) then
       call dense_factorize(this, irn, jcn, a)
       deallocate (irn, jcn, a)
@@ -275,7 +283,6 @@ contains
     ! the pivot order: only the host of each group's instance reads it
     call timer_start('coarse: ordering')
     t0 = MPI_Wtime()
-    if (present(schur_positions)) call this%schur%init(layout%nsub, schur_positions)
     if (this%group_rank == 0) then
       perm = coarse_ordering(dec, layout)
       if (this%schur%m > 0) call schur_last(perm, this%schur%vars)
@@ -320,6 +327,22 @@ contains
     this%sfac%seconds = MPI_Wtime() - t0
     call timer_stop('coarse: factorization')
   end subroutine take_schur
+
+  !> This rank's subdomains with a Schur rotation (local index, position).
+  subroutine local_rotations(this, dec)
+    class(coarse_problem_t), intent(inout) :: this
+    type(decomposition_t), intent(in) :: dec
+    integer(ip) :: ls, pos, k
+    allocate (this%rotated(2, size(dec%local_subdomains)))
+    k = 0
+    do ls = 1, size(dec%local_subdomains, kind=ip)
+      pos = this%layout%position(dec%local_subdomains(ls))
+      if (this%schur%which(pos) == 0) cycle
+      k = k + 1
+      this%rotated(:, k) = [ls, pos]
+    end do
+    this%rotated = this%rotated(:, 1:k)
+  end subroutine local_rotations
 
   !> Move the pivot positions of `vars` (global rows, ascending) to the end
   !> of the order `perm` (perm(row) = position), the others keeping theirs in
@@ -395,6 +418,17 @@ contains
     this%factorized = .true.
   end subroutine make_view
 
+  !> This instance becomes a view of `parent` that solves with parent's own
+  !> matrix: a mask holding every row (no second factorization).
+  subroutine make_alias(this, parent)
+    class(coarse_problem_t), intent(inout) :: this
+    type(coarse_problem_t), intent(in), target :: parent
+    call this%free()
+    this%view_of => parent
+    this%seconds_factorization = 0
+    this%factorized = .true.
+  end subroutine make_alias
+
   !> x = A^{-1} b in Schur mode, A given by the dense factor `fac` of its
   !> Schur complement (this instance's MUMPS factors). Collective.
   subroutine solve_schur(this, fac, b, x)
@@ -402,11 +436,24 @@ contains
     type(schur_factor_t), intent(in) :: fac
     real(dp), intent(in) :: b(:)
     real(dp), intent(out) :: x(:)
-    call gather_column(this, b, this%rhs(:, 1))
+    real(dp), allocatable :: bt(:)
+    integer(ip) :: k
+    bt = b
+    do k = 1, size(this%rotated, 2, kind=ip)
+      associate (ls => this%rotated(1, k))
+        call this%schur%rotate(this%rotated(2, k), bt(6*ls - 5:6*ls), .true.)
+      end associate
+    end do
+    call gather_column(this, bt, this%rhs(:, 1))
     call this%mumps%solve_condense(this%rhs(:, 1), this%red)
     if (this%group_rank == 0) call fac%solve(this%red)
     call this%mumps%solve_expand(this%rhs(:, 1), this%red)
     call scatter_column(this, this%rhs(:, 1), x)
+    do k = 1, size(this%rotated, 2, kind=ip)
+      associate (ls => this%rotated(1, k))
+        call this%schur%rotate(this%rotated(2, k), x(6*ls - 5:6*ls), .false.)
+      end associate
+    end do
   end subroutine solve_schur
 
   logical function has_schur(this)
@@ -494,6 +541,11 @@ contains
       if (.not. (keep .or. full_pattern)) cycle
       call row_blocks(dec, con, this%layout, i, nb, pos, blk)
       if (.not. keep) blk = 0
+      if (this%schur%m > 0) then
+        do j1 = 1, nb
+          call this%schur%rotate(pos(j1), blk(:, j1), .true.)
+        end do
+      end if
       do j1 = 1, nb
         do j2 = j1, nb
           call add_product(pos(j1), pos(j2), blk(:, j1), blk(:, j2))
@@ -701,7 +753,11 @@ contains
     real(dp), allocatable :: t(:)
     integer :: nmine, ierr
     if (associated(this%view_of)) then
-      call solve_schur(this%view_of, this%sfac, b, x)
+      if (allocated(this%sfac%l)) then
+        call solve_schur(this%view_of, this%sfac, b, x)
+      else
+        call this%view_of%solve(b, x)
+      end if
       return
     end if
     call this%solve_base(b, x)
@@ -1200,6 +1256,7 @@ contains
     call this%schur%free()
     if (allocated(this%sfac%l)) deallocate (this%sfac%l)
     if (allocated(this%red)) deallocate (this%red)
+    if (allocated(this%rotated)) deallocate (this%rotated)
     if (this%factorized .and. .not. this%dense) call this%mumps%free()
     if (allocated(this%ufac)) deallocate (this%ufac)
     this%dense = .false.

@@ -11,27 +11,40 @@
 !> dense triangular solves and an expansion: no second sparse factorization,
 !> no low-rank update solves.
 !>
-!> This module holds what the host of a coarse group keeps: S, the map from
-!> coarse positions to Schur slots, and Cholesky factors of S - D. The
-!> contributions (G e_r restricted to one subdomain: 6 values) arrive as
-!> "pieces" keyed by their row, from every rank.
+!> A contact row acts on the normal displacement of contact-face nodes only:
+!> on one subdomain its 6 coarse values G e_r span (over all contact rows) a
+!> space of dimension 3 at most (the normal translation and the two
+!> tangential rotations). Each contact-face subdomain's 6 coarse rows are
+!> rotated by an orthogonal Q_s (the eigenvectors of the sum of its g g^T,
+!> that space first), and only its first r_s <= 3 rotated rows are Schur
+!> rows: half the dense Schur complement, and fewer rows forced to the end
+!> of MUMPS's pivot order.
+!>
+!> This module holds the rotations and what the host of a coarse group
+!> keeps: S, the map from coarse positions to Schur slots, and Cholesky
+!> factors of S - D. The contributions (G e_r restricted to one subdomain: 6
+!> values, unrotated) arrive as "pieces" keyed by their row, from every rank.
 module coarse_schur
   use kinds, only: dp, ip, i8
   use errors, only: fatal_error
   use sorting, only: sort_permutation
-  use lapack_interfaces, only: dpotrf, dpotrs
+  use lapack_interfaces, only: dpotrf, dpotrs, dsyev
   implicit none
   private
 
   type, public :: coarse_schur_t
-    integer(ip) :: m = 0                      !< Schur rows: 6 per contact-face subdomain
-    !> coarse position -> offset of its 6 rows in the Schur order (-1: eliminated)
+    integer(ip) :: m = 0                      !< Schur rows: r_s per contact-face subdomain s
+    !> coarse position -> offset of its Schur rows in the Schur order (-1: none)
     integer(ip), allocatable :: slot(:)
+    integer(ip), allocatable :: which(:)      !< coarse position -> index j of its rotation (0: none)
+    real(dp), allocatable :: q(:, :, :)       !< (6, 6, j): the rotation Q_s, contact directions first
+    integer(ip), allocatable :: r(:)          !< (j): Schur rows of the subdomain
     integer(ip), allocatable :: vars(:)       !< the Schur rows as global coarse rows, ascending
     real(dp), allocatable :: s(:, :)          !< host: the Schur complement of G G^T (full, symmetric)
   contains
     procedure :: init
     procedure :: downdated_factor
+    procedure :: rotate
     procedure :: free
   end type coarse_schur_t
 
@@ -47,27 +60,60 @@ module coarse_schur
 
 contains
 
-  !> The Schur rows for the subdomains at coarse `positions` (ascending,
-  !> among `nsub`).
-  subroutine init(this, nsub, positions)
+  !> The rotations and Schur rows of the subdomains at coarse `positions`
+  !> (ascending, among `nsub`): gram(:, :, j) = sum of g g^T over the contact
+  !> rows' pieces on the j-th of them.
+  subroutine init(this, nsub, positions, gram)
     class(coarse_schur_t), intent(inout) :: this
     integer(ip), intent(in) :: nsub
     integer(ip), intent(in) :: positions(:)
-    integer(ip) :: j, k
+    real(dp), intent(in) :: gram(:, :, :)
+    integer(ip) :: j, k, n
+    real(dp) :: a(6, 6), w(6), work(64)
+    integer :: info
     call this%free()
-    this%m = 6*size(positions, kind=ip)
-    allocate (this%slot(nsub), this%vars(this%m))
+    n = size(positions, kind=ip)
+    allocate (this%slot(nsub), this%which(nsub), this%q(6, 6, n), this%r(n))
     this%slot = -1
-    do j = 1, size(positions, kind=ip)
+    this%which = 0
+    do j = 1, n
       if (j > 1) then
         if (positions(j) <= positions(j - 1)) call fatal_error('coarse_schur: positions must ascend')
       end if
-      this%slot(positions(j)) = 6*(j - 1)
-      do k = 1, 6
-        this%vars(6*(j - 1) + k) = 6*(positions(j) - 1) + k
+      a = gram(:, :, j)
+      call dsyev('V', 'U', 6, a, 6, w, work, size(work), info)
+      if (info /= 0 .or. w(6) <= 0) call fatal_error('coarse_schur: no contact direction on a subdomain')
+      ! descending: the contact directions first
+      this%q(:, :, j) = a(:, 6:1:-1)
+      this%r(j) = count(w > 1.0e-10_dp*w(6), kind=ip)
+      this%which(positions(j)) = j
+      this%slot(positions(j)) = this%m
+      this%m = this%m + this%r(j)
+    end do
+    allocate (this%vars(this%m))
+    do j = 1, n
+      do k = 1, this%r(j)
+        this%vars(this%slot(positions(j)) + k) = 6*(positions(j) - 1) + k
       end do
     end do
   end subroutine init
+
+  !> v <- Q_s^T v (forward) or Q_s v for the subdomain at coarse position
+  !> `pos` (unchanged without a rotation).
+  pure subroutine rotate(this, pos, v, forward)
+    class(coarse_schur_t), intent(in) :: this
+    integer(ip), intent(in) :: pos
+    real(dp), intent(inout) :: v(6)
+    logical, intent(in) :: forward
+    integer(ip) :: j
+    j = this%which(pos)
+    if (j == 0) return
+    if (forward) then
+      v = matmul(transpose(this%q(:, :, j)), v)
+    else
+      v = matmul(this%q(:, :, j), v)
+    end if
+  end subroutine rotate
 
   !> fac = Cholesky factor of S - D, D = sum over rows of v_r v_r^T, v_r the
   !> sum of the pieces of row r: piece p adds g(:, p) at the 6 Schur rows of
@@ -80,9 +126,14 @@ contains
     type(schur_factor_t), intent(inout) :: fac
     real(dp), allocatable :: a(:, :)
     integer(ip), allocatable :: perm(:)
-    integer(ip) :: first, last, p, q, sp, sq, np
+    integer(ip) :: first, last, p, q, sp, sq, np, rp, rq
     integer :: i, j
+    real(dp), allocatable :: gr(:, :)
     a = this%s
+    gr = g
+    do p = 1, size(keys, kind=ip)
+      call this%rotate(pos(p), gr(:, p), .true.)
+    end do
     np = size(keys, kind=ip)
     call sort_permutation(keys, perm)
     first = 1
@@ -96,12 +147,13 @@ contains
       do p = first, last
         sp = this%slot(pos(perm(p)))
         if (sp < 0) call fatal_error('coarse_schur: a contact row touches a subdomain without Schur rows')
+        rp = this%r(this%which(pos(perm(p))))
         do q = first, last
           sq = this%slot(pos(perm(q)))
-          if (sq < 0) call fatal_error('coarse_schur: a contact row touches a subdomain without Schur rows')
-          do j = 1, 6
-            do i = 1, 6
-              a(sp + i, sq + j) = a(sp + i, sq + j) - g(i, perm(p))*g(j, perm(q))
+          rq = this%r(this%which(pos(perm(q))))
+          do j = 1, int(rq)
+            do i = 1, int(rp)
+              a(sp + i, sq + j) = a(sp + i, sq + j) - gr(i, perm(p))*gr(j, perm(q))
             end do
           end do
         end do
@@ -142,6 +194,7 @@ contains
     class(coarse_schur_t), intent(inout) :: this
     this%m = 0
     if (allocated(this%slot)) deallocate (this%slot)
+    if (allocated(this%which)) deallocate (this%which, this%q, this%r)
     if (allocated(this%vars)) deallocate (this%vars)
     if (allocated(this%s)) deallocate (this%s)
   end subroutine free

@@ -4,13 +4,13 @@
 !> the B operator that holds its entries (b_operator), which is passed in.
 !> Timer 'coarse solve'.
 module projector
-  use kinds, only: dp, i8, ip, MPI_INT_IP
+  use kinds, only: dp, i8, ip, MPI_INT_IP, MPI_REAL_DP
   use timers, only: timer_start, timer_stop
   use decomposition, only: decomposition_t
   use constraints, only: constraints_t, row_contact
   use coarse_problem, only: coarse_problem_t, coarse_layout_t, build_coarse_layout, coarse_options_t, &
                             choose_coarse_ranks, ranks_per_node, dense_for
-  use sorting, only: sort_ints
+  use sorting, only: sort_permutation
   use params, only: solver_params_t
   use errors, only: collective_error, exit_input_error
   use logger, only: log_message
@@ -64,6 +64,7 @@ contains
     logical, intent(in) :: regular_base
     type(constraints_t), pointer :: con
     integer(ip), allocatable :: schur_positions(:)
+    real(dp), allocatable :: schur_gram(:, :, :)
     integer :: nranks, ierr, c
     character(len=300) :: msg
     call this%free()
@@ -77,9 +78,10 @@ contains
     this%options = coarse_options_t(c, s%coarse_blr, s%coarse_ooc, s%coarse_factor)
     con => b%constraints()
     call build_coarse_layout(dec, comm, this%layout)
-    schur_positions = contact_face_positions(this, dec, con, regular_base)
+    call contact_face_subdomains(this, dec, con, regular_base, schur_positions, schur_gram)
     if (size(schur_positions) > 0) then
-      call this%coarse%init(dec, con, this%layout, comm, options=this%options, schur_positions=schur_positions)
+      call this%coarse%init(dec, con, this%layout, comm, options=this%options, schur_positions=schur_positions, &
+                            schur_gram=schur_gram)
     else
       call this%coarse%init(dec, con, this%layout, comm, options=this%options)
     end if
@@ -147,16 +149,18 @@ contains
 
   !> G_M G_M^T for the rows in `mask` in the projector's one reusable
   !> instance (valid until the next call: SMALBE's faces, then the standard
-  !> reconstruction's G_A G_A^T). Two ways (docs/THEORY.md, "Face coarse
-  !> matrices"):
-  !> - `low_rank` (faces), `regular_base` (G_E G_E^T of the equality rows E
-  !>   is regular: the Dirichlet rows fix every rigid body motion), every
-  !>   equality row in `mask` and few contact rows in it: G_M G_M^T = G_E G_E^T
-  !>   + V V^T, V = the columns G e_r of the k contact rows r in `mask`.
-  !>   G_E G_E^T is factorized once per run; each call builds V and applies
-  !>   Woodbury's formula (coarse_problem%set_update: one solve with k
-  !>   right-hand sides, a k x k Cholesky factor). "Few": the k solves cost
-  !>   less than a numerical factorization, 4 k (factor entries) <= flops.
+  !> reconstruction's G_A G_A^T). The first way that applies:
+  !> - every row in `mask`: G G^T itself (an alias, nothing factorized);
+  !> - the coarse problem has Schur rows (coarse_schur), `regular_base` (the
+  !>   Dirichlet rows fix every rigid body motion) and every equality row is
+  !>   in `mask`: a view of G G^T's factors with a dense factor of S - D_M;
+  !> - `low_rank` (faces), `regular_base`, every equality row in `mask` and
+  !>   few contact rows in it: G_M G_M^T = G_E G_E^T + V V^T, V = the columns
+  !>   G e_r of the k contact rows r in `mask`. G_E G_E^T is factorized once
+  !>   per run; each call builds V and applies Woodbury's formula
+  !>   (coarse_problem%set_update: one solve with k right-hand sides, a k x k
+  !>   Cholesky factor). "Few": the k solves cost less than a numerical
+  !>   factorization, 4 k (factor entries) <= flops;
   !> - otherwise the numerical factorization of G_M G_M^T on the pattern and
   !>   with the MUMPS analysis of the instance's first factorization (the
   !>   instance is assembled on the pattern of G G^T, rows outside the mask
@@ -190,6 +194,11 @@ contains
     local(2) = count(.not. (mask(1:con%n_own) .or. contact), kind=ip)
     call MPI_Allreduce(local, total, 2, MPI_INT_IP, MPI_SUM, this%comm, ierr)
     k = total(1)
+    if (all_rows(mask, con%n_own)) then
+      call this%masked%make_alias(this%coarse)
+      this%masked_mode = masked_view
+      return
+    end if
     ! cost model: the main factorization's figures (the same pattern)
     flops = this%coarse%factor_flops()
     entries = real(this%coarse%factor_entries(), dp)
@@ -257,6 +266,14 @@ contains
     end if
   contains
 
+    !> Every row of every rank in the mask. Collective.
+    logical function all_rows(mask, n)
+      logical, intent(in) :: mask(:)
+      integer(ip), intent(in) :: n
+      all_rows = all(mask(1:n))
+      call MPI_Allreduce(MPI_IN_PLACE, all_rows, 1, MPI_LOGICAL, MPI_LAND, this%comm, ierr)
+    end function all_rows
+
     !> The keys of all ranks in rank order (k of them in all). Collective.
     function gather_keys(mine, k) result(all)
       integer(i8), intent(in) :: mine(:)
@@ -277,39 +294,50 @@ contains
   end function masked_coarse
 
   !> The coarse positions (ascending, the same on every rank) of the
-  !> subdomains that contact rows touch, when the coarse problem should keep
-  !> their rows as a Schur complement (coarse_schur): MUMPS factors, the
-  !> equality rows alone fixing every rigid body motion (the face matrices
-  !> are then positive definite), and at most a quarter of the subdomains
-  !> under contact. Otherwise none. Collective.
-  function contact_face_positions(this, dec, con, regular_base) result(positions)
+  !> subdomains that contact rows touch, and for each the sum of g g^T over
+  !> the contact rows' pieces on it, when the coarse problem should keep their
+  !> rows as a Schur complement (coarse_schur): MUMPS factors, the equality
+  !> rows alone fixing every rigid body motion (the face matrices are then
+  !> positive definite), and at most a quarter of the subdomains under
+  !> contact. Otherwise none. Collective.
+  subroutine contact_face_subdomains(this, dec, con, regular_base, positions, gram)
     class(projector_t), intent(in) :: this
     type(decomposition_t), intent(in) :: dec
     type(constraints_t), intent(inout) :: con
     logical, intent(in) :: regular_base
-    integer(ip), allocatable :: positions(:)
-    real(dp), allocatable :: col(:), wloc(:)
-    integer(ip), allocatable :: mine(:)
-    integer(ip) :: ls, e, n_mine, n
+    integer(ip), allocatable, intent(out) :: positions(:)
+    real(dp), allocatable, intent(out) :: gram(:, :, :)
+    real(dp), allocatable :: col(:), wloc(:), my_gram(:, :, :)
+    integer(ip), allocatable :: mine(:), order(:)
+    real(dp) :: gs(6, 6)
+    integer(ip) :: ls, e, n_mine, n, k
     integer, allocatable :: counts(:), displs(:)
     integer :: nranks, ierr, r, cnt
     logical :: touched
-    allocate (positions(0))
+    allocate (positions(0), gram(6, 6, 0))
     if (.not. regular_base .or. con%n_contact_global == 0) return
     if (dense_for(this%options%factor, 6*this%layout%nsub, this%options%ranks_per_group)) return
     allocate (col(con%n_own), wloc(con%n_local))
     col = merge(1.0_dp, 0.0_dp, con%kind(1:con%n_own) == row_contact)
     call con%exchange%gather(col, wloc)
-    allocate (mine(size(con%b)))
+    allocate (mine(size(con%b)), my_gram(6, 6, size(con%b)))
     n_mine = 0
     do ls = 1, size(con%b, kind=ip)
       touched = .false.
-      do e = 1, con%b(ls)%nentries
-        if (wloc(con%b(ls)%row(e)) > 0) touched = .true.
-      end do
+      gs = 0
+      associate (bs => con%b(ls))
+        do e = 1, bs%nentries
+          if (wloc(bs%row(e)) <= 0) cycle
+          touched = .true.
+          do k = 1, 6
+            gs(:, k) = gs(:, k) + bs%g(:, e)*bs%g(k, e)
+          end do
+        end do
+      end associate
       if (touched) then
         n_mine = n_mine + 1
         mine(n_mine) = this%layout%position(dec%local_subdomains(ls))
+        my_gram(:, :, n_mine) = gs
       end if
     end do
     call MPI_Comm_size(this%comm, nranks, ierr)
@@ -322,11 +350,15 @@ contains
     end do
     n = sum(counts)
     if (4*n > this%layout%nsub) return
-    deallocate (positions)
-    allocate (positions(n))
+    deallocate (positions, gram)
+    allocate (positions(n), gram(6, 6, n))
     call MPI_Allgatherv(mine(1:n_mine), cnt, MPI_INT_IP, positions, counts, displs, MPI_INT_IP, this%comm, ierr)
-    call sort_ints(positions)
-  end function contact_face_positions
+    call MPI_Allgatherv(my_gram(:, :, 1:n_mine), 36*cnt, MPI_REAL_DP, gram, 36*counts, 36*displs, MPI_REAL_DP, &
+                        this%comm, ierr)
+    call sort_permutation(positions, order)
+    positions = positions(order)
+    gram = gram(:, :, order)
+  end subroutine contact_face_subdomains
 
   !> masked holds G_M G_M^T as a view of the coarse problem's Schur factors:
   !> every row outside the mask is a contact row. Collective.
