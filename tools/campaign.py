@@ -72,6 +72,7 @@ import time
 import variants as solver_variants  # tools/variants.py (this folder is on sys.path)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TOOL = os.path.abspath(__file__)  # hints name it absolutely: they work from any folder
 
 # Phases in the order the program runs them; phases not listed here (a timer
 # added later) get columns too, after these.
@@ -981,8 +982,9 @@ def submit_slurm(args, plan, out, program):
         reps = sorted(reps)
         old = [j for j in data["jobs"] if j["member"] == name and j["ranks"] == np_ and set(j["reps"]) & set(reps)]
         if old and current[id(old[0])] != "not submitted":
-            hint = " (tools/campaign.py --resubmit failed --out %s sends it again)" % out if current[id(old[0])] \
-                not in ("pending", "running", "completed", "unknown") else ""
+            hint = ""
+            if current[id(old[0])] not in ("pending", "running", "completed", "unknown"):
+                hint = " (%s --resubmit failed --out %s sends it again)" % (TOOL, shlex.quote(out))
             print("campaign: %s np%d: job %s is %s, not submitted again%s" % (
                 name, np_, old[0].get("job_id"), current[id(old[0])], hint))
             kept += 1
@@ -1014,7 +1016,7 @@ def submit_slurm(args, plan, out, program):
     if not args.dry_run:
         print("campaign: %d jobs submitted, %d already there; jobs in %s" % (submitted, kept,
                                                                            os.path.join(out, JOBS_FILE)))
-        print("campaign: tools/campaign.py --status %s  /  --collect %s [--wait]" % (out, out))
+        print("campaign: %s --status %s  /  --collect %s [--wait]" % (TOOL, shlex.quote(out), shlex.quote(out)))
     return 0
 
 
