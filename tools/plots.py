@@ -45,9 +45,15 @@ import numpy as np  # noqa: E402
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MARKERS = "osD^v<>p*h"
 
-# Phases shown in the weak-scaling time figure: label -> timer names summed (max over ranks).
+# Set-up phases of a campaign.csv written before its setup_max column (tools/campaign.py SETUP_PHASES).
+SETUP_PHASES = ["mesh", "assembly", "factorization", "B and G", "explicit F", "coarse setup", "orthonormal coarse",
+                "preconditioner setup"]
+
+# Phases shown in the weak-scaling time figure: label -> timer names summed (max over ranks);
+# SETUP: tools/campaign.py's set-up, every phase before the solve except the dual set-up.
+SETUP = "setup"
 PHASE_GROUPS = [
-    ("set-up (mesh, K, K^+, B, G, GG^T)", ["mesh", "assembly", "factorization", "B and G", "coarse setup"]),
+    ("set-up (mesh, K, K^+, B, G, explicit F, GG^T)", SETUP),
     ("factorization of K^s", ["factorization"]),
     ("dual set-up (d, lambda~, ||PFP||)", ["dual setup"]),
     ("SMALBE/MPRGP solve", ["solve"]),
@@ -111,6 +117,11 @@ def values(runs, col):
 
 
 def summed(run, phases, stat="max"):
+    if phases == SETUP:
+        if num(run.get("setup_" + stat)) is not None:
+            return num(run.get("setup_" + stat))
+        v = [x for x in (num(run.get(phase_column(p, stat))) for p in SETUP_PHASES) if x is not None]
+        return sum(v) if v else None
     v = [num(run.get(phase_column(p, stat))) for p in phases]
     return sum(v) if v and all(x is not None for x in v) else None
 
@@ -442,7 +453,7 @@ def cmd_hertz(args):
             label="Hertz: F = %.4g N, a = %.4g mm, p0 = %.4g MPa" % (force, a, p0))
     sel = r <= rr[-1]
     ax.plot(r[sel], pc[sel], "o", ms=3, color="C0", alpha=0.7,
-            label="computed, %d contact nodes (h = %.3g mm)" % (sel.sum(), h))
+            label="computed: %d nodes in contact (p > 0) of %d shown (h = %.3g mm)" % (active.sum(), sel.sum(), h))
     ax.axvline(a, color="k", ls=":", lw=0.8)
     ax.axvline(r_active, color="C0", ls=":", lw=0.8)
     ax.set_xlabel("r: distance from the sphere axis [mm]")
@@ -458,6 +469,7 @@ def cmd_hertz(args):
     print("| contact radius a [mm] | %.4g | %.4g (last active node); next node %.4g | %.3f |" % (
         a, r_active, r_next, r_active / a))
     print("| max pressure p0 [MPa] | %.5g | %.5g | %.4f |" % (p0, pmax, pmax / p0))
+    print("| nodes in contact (p > 0) | | %d | |" % active.sum())
     print("| rms(p - p_Hertz)/p0 over r < 0.9a | | %.3g | |" % rms)
     print("h = %.4g mm, a/h = %.2f; a/R = %.3f, a/Lx = %.3f (Hertz assumes both small)" % (
         h, a / h, a / radius, a / lx))
