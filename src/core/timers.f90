@@ -178,14 +178,18 @@ contains
   subroutine timers_reduce(comm, stats)
     type(MPI_Comm), intent(in) :: comm
     type(timer_stat_t), allocatable, intent(out) :: stats(:)
-    character(len=key_len), allocatable :: keys(:)
+    character(len=key_len), allocatable :: keys(:), local(:)
     character(len=name_len), allocatable :: labels(:), phase_names(:), mark_names(:)
     integer, allocatable :: up(:), order(:), row_of(:), phase_of(:)
     integer(i8), allocatable :: peak(:), added(:), resident(:)
     real(dp), allocatable :: mine(:), lo(:), hi(:), sums(:)
     integer :: n, nrows, nphases, ntree, i, j, k, ierr, nranks
 
-    call union_of_paths(comm, keys)
+    allocate (local(count))
+    do i = 1, count
+      local(i) = key_of(i)
+    end do
+    call union_of_paths(comm, local, keys)
     n = size(keys)
     allocate (labels(n), up(n), row_of(n), phase_of(n), phase_names(n))
     ! each path's parent and label; parents come before their children in `keys`
@@ -226,8 +230,9 @@ contains
     nrows = ntree + nphases
     allocate (mine(nrows), lo(nrows), hi(nrows), sums(nrows))
     mine = 0
-    do k = 1, n
-      mine(row_of(k)) = local_seconds(keys(k))
+    do i = 1, count
+      k = findloc(keys, local(i), dim=1)
+      mine(row_of(k)) = total(i)
     end do
     do i = 1, ntree
       if (order(i) < 0) then
@@ -319,41 +324,27 @@ contains
     end function under_same_label
   end subroutine timers_reduce
 
-  !> Seconds of the path `key` on this rank (0 if it never ran here).
-  real(dp) function local_seconds(key)
-    character(len=*), intent(in) :: key
-    integer :: i
-    local_seconds = 0
-    do i = 1, count
-      if (key_of(i) == key) then
-        local_seconds = total(i)
-        return
-      end if
-    end do
-  end function local_seconds
-
-  !> The paths of every rank, the same list on all: rank 0's in the order it
-  !> created them, then those only other ranks have (a rank at a time, the
-  !> lowest first). A parent comes before its children. Collective.
-  subroutine union_of_paths(comm, keys)
+  !> The paths of every rank (`local`: this rank's), the same list on all:
+  !> rank 0's in the order it created them, then those only other ranks have
+  !> (a rank at a time, the lowest first). A parent comes before its children.
+  !> Collective.
+  subroutine union_of_paths(comm, local, keys)
     type(MPI_Comm), intent(in) :: comm
+    character(len=key_len), intent(in) :: local(:)
     character(len=key_len), allocatable, intent(out) :: keys(:)
-    character(len=key_len), allocatable :: local(:), extra(:)
+    character(len=key_len), allocatable :: extra(:)
     integer :: rank, n, m, i, from, ierr
     logical, allocatable :: known(:)
 
     call MPI_Comm_rank(comm, rank, ierr)
-    allocate (local(count), known(count))
-    do i = 1, count
-      local(i) = key_of(i)
-    end do
-    n = count
+    allocate (known(size(local)))
+    n = size(local)
     call MPI_Bcast(n, 1, MPI_INTEGER, 0, comm, ierr)
     allocate (keys(n))
     if (rank == 0) keys = local
     if (n > 0) call MPI_Bcast(keys, key_len*n, MPI_CHARACTER, 0, comm, ierr)
     do
-      do i = 1, count
+      do i = 1, size(local)
         known(i) = any(keys == local(i))
       end do
       from = huge(from)
