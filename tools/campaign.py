@@ -76,9 +76,9 @@ TOOL = os.path.abspath(__file__)  # hints name it absolutely: they work from any
 
 # Phases in the order the program runs them; phases not listed here (a timer
 # added later) get columns too, after these.
-KNOWN_PHASES = ["total", "mesh", "assembly", "factorization", "B and G", "coarse setup", "dual setup", "solve",
-                "dual gradient", "rec new", "rec standard", "primal", "kkt", "output",
-                "F action", "coarse solve"]  # the last two are nested in dual setup, solve, ...
+KNOWN_PHASES = ["total", "mesh", "assembly", "factorization", "B and G", "explicit F", "coarse setup", "dual setup",
+                "preconditioner setup", "solve", "dual gradient", "rec new", "rec standard", "primal", "kkt",
+                "output", "F action", "coarse solve"]  # the last two are nested in dual setup, solve, ...
 
 # Columns before the timing columns, in CSV order: (column, path in report.json or None).
 RUN_COLUMNS = ["campaign", "member", "variant", "input", "overrides", "ranks", "rep", "exit_status", "status", "message",
