@@ -52,15 +52,18 @@ module timers
 
 contains
 
-  !> The node `name` under `parent` (0: a root), created when missing.
+  !> The node `name` under `parent` (0: a root), created when missing. Names
+  !> longer than name_len are cut to it.
   integer function child(parent, name)
     integer, intent(in) :: parent
     character(len=*), intent(in) :: name
+    character(len=name_len) :: cut
     integer :: i, last
+    cut = name
     last = 0
     i = first_child(parent)
     do while (i > 0)
-      if (names(i) == name) then
+      if (names(i) == cut) then
         child = i
         return
       end if
@@ -69,7 +72,7 @@ contains
     end do
     if (count == max_timers) call fatal_error('timers: more than 256 timer paths')
     count = count + 1
-    names(count) = name
+    names(count) = cut
     parent_of(count) = parent
     if (last == 0) then
       first_child(parent) = count
@@ -95,12 +98,14 @@ contains
   !> Stop the timer `name` (the innermost running one) and add the elapsed time to its path.
   subroutine timer_stop(name)
     character(len=*), intent(in) :: name
+    character(len=name_len) :: cut
     integer :: i, k
     if (depth == 0) call fatal_error('timers: stop of a timer not running: '//trim(name))
     i = stack(depth)
-    if (names(i) /= name) then
+    cut = name
+    if (names(i) /= cut) then
       do k = depth - 1, 1, -1
-        if (names(stack(k)) == name) call fatal_error('timers: stop of '''//trim(name)//''' while '''// &
+        if (names(stack(k)) == cut) call fatal_error('timers: stop of '''//trim(name)//''' while '''// &
                                                       trim(names(i))//''', started inside it, still runs')
       end do
       call fatal_error('timers: stop of a timer not running: '//trim(name))
@@ -114,11 +119,13 @@ contains
   !> (0 if never used; the running interval not included).
   real(dp) function timer_seconds(name)
     character(len=*), intent(in) :: name
+    character(len=name_len) :: cut
     integer :: i
+    cut = name
     timer_seconds = 0
     do i = 1, count
-      if (names(i) == name) then
-        if (.not. has_ancestor(i, name)) timer_seconds = timer_seconds + total(i)
+      if (names(i) == cut) then
+        if (.not. has_ancestor(i, cut)) timer_seconds = timer_seconds + total(i)
       end if
     end do
   end function timer_seconds
