@@ -176,12 +176,13 @@ contains
     end do
   end function stat_path
 
-  !> Min / max / mean over the ranks of `comm`, collective. The rows: the tree
+  !> Min / max / mean over the ranks of `comm` (a running timer counts up to
+  !> now), collective. The rows: the tree
   !> (row_tree, depth first, sub-rows in the order they were first started,
   !> after the sub-rows of each parent a row_other with the parent's time
   !> outside them, so the sub-rows and `other` add up to the parent), then the
   !> memory marks (row_memory), then one row_phase per name in the order the
-  !> names were first started (the per-name totals, as timer_seconds).
+  !> names were first started (the per-name totals).
   subroutine timers_reduce(comm, stats)
     type(MPI_Comm), intent(in) :: comm
     type(timer_stat_t), allocatable, intent(out) :: stats(:)
@@ -190,6 +191,7 @@ contains
     integer, allocatable :: up(:), order(:), row_of(:), phase_of(:)
     integer(i8), allocatable :: peak(:), added(:), resident(:)
     real(dp), allocatable :: mine(:), lo(:), hi(:), sums(:)
+    real(dp) :: now
     integer :: n, nrows, nphases, ntree, i, j, k, ierr, nranks
 
     allocate (local(count))
@@ -237,9 +239,11 @@ contains
     nrows = ntree + nphases
     allocate (mine(nrows), lo(nrows), hi(nrows), sums(nrows))
     mine = 0
+    now = MPI_Wtime()
     do i = 1, count
       k = findloc(keys, local(i), dim=1)
       mine(row_of(k)) = total(i)
+      if (started(i) >= 0) mine(row_of(k)) = mine(row_of(k)) + (now - started(i))
     end do
     do i = 1, ntree
       if (order(i) < 0) then
