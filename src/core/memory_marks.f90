@@ -77,10 +77,10 @@ contains
     local = 0
     do i = 1, n
       local(:, i) = [marks(i)%peak, marks(i)%peak, marks(i)%resident]
-      if (i > 1) then
-        local(2, i) = -1
-        if (marks(i)%peak >= 0 .and. marks(i - 1)%peak >= 0) local(2, i) = marks(i)%peak - marks(i - 1)%peak
-      end if
+    end do
+    do i = 2, n
+      local(2, i) = -1
+      if (marks(i)%peak >= 0 .and. marks(i - 1)%peak >= 0) local(2, i) = marks(i)%peak - marks(i - 1)%peak
     end do
     call MPI_Allreduce(local, hi, size(local), MPI_INT_I8, MPI_MAX, comm, ierr)
     call MPI_Allreduce(local, lo, size(local), MPI_INT_I8, MPI_MIN, comm, ierr)
