@@ -72,12 +72,13 @@ import time
 import variants as solver_variants  # tools/variants.py (this folder is on sys.path)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TOOL = os.path.abspath(__file__)  # hints name it absolutely: they work from any folder
 
 # Phases in the order the program runs them; phases not listed here (a timer
 # added later) get columns too, after these.
-KNOWN_PHASES = ["total", "mesh", "assembly", "factorization", "B and G", "coarse setup", "dual setup", "solve",
-                "dual gradient", "rec new", "rec standard", "primal", "kkt", "output",
-                "F action", "coarse solve"]  # the last two are nested in dual setup, solve, ...
+KNOWN_PHASES = ["total", "mesh", "assembly", "factorization", "B and G", "explicit F", "coarse setup", "dual setup",
+                "preconditioner setup", "solve", "dual gradient", "rec new", "rec standard", "primal", "kkt",
+                "output", "F action", "coarse solve"]  # the last two are nested in dual setup, solve, ...
 
 # Columns before the timing columns, in CSV order: (column, path in report.json or None).
 RUN_COLUMNS = ["campaign", "member", "variant", "input", "overrides", "ranks", "rep", "exit_status", "status", "message",
@@ -140,6 +141,9 @@ REPORT_COLUMNS = [
     ("contact_radius", ("contact", "contact_radius")),
     ("peak_rss_max_bytes", ("memory", "peak_rss_bytes", "max")),
     ("peak_rss_sum_bytes", ("memory", "peak_rss_bytes", "sum")),
+    ("setup_max", None),
+    ("setup_mean", None),
+    ("setup_phases", None),
 ]
 KKT_KEYS = ["kkt_equilibrium", "kkt_equality", "kkt_feasibility", "kkt_dual_feasibility", "kkt_complementarity"]
 EXIT_MEANING = {0: "ok", 2: "bad input", 3: "not converged", 4: "KKT failed", 5: "internal error"}
@@ -390,7 +394,38 @@ def report_row(report):
         for s in ("mean", "max"):
             if isinstance(stat, dict) and s in stat:
                 row[phase_column(phase, s)] = cell(stat[s])
+    phases, seconds = setup_of(report)
+    if phases:
+        row["setup_max"], row["setup_mean"] = cell(seconds["max"]), cell(seconds["mean"])
+        row["setup_phases"] = "+".join(phases)
     return row
+
+
+def setup_phases(report):
+    """The set-up phases of a run: the top-level phases of report.json's timing tree
+    (timings.total.children) before the solve, except 'dual setup' (a column of its own);
+    for a report without the tree, those of SETUP_PHASES it has."""
+    t = report.get("timings") or {}
+    children = (t.get("total") or {}).get("children")
+    if not children:
+        return [p for p in SETUP_PHASES if isinstance(t.get(p), dict)]
+    names = []
+    for c in children:
+        if c.get("name") == "solve":
+            break
+        if c.get("name") not in SETUP_EXCLUDED:
+            names.append(c["name"])
+    return names
+
+
+def setup_of(report):
+    """(set-up phases, {"max": s, "mean": s}): the sums of their max and mean over ranks,
+    from the tree's top-level rows (a phase that also ran later, inside the solve, counts
+    its set-up part only) or, without the tree, the flat timings."""
+    t = report.get("timings") or {}
+    phases = setup_phases(report)
+    rows = {c.get("name"): c for c in (t.get("total") or {}).get("children") or []} or t
+    return phases, {s: sum(rows[p][s] for p in phases) for s in ("max", "mean")}
 
 
 def columns_for(rows):
@@ -489,13 +524,22 @@ SUMMARY = [  # header, column, kind
     ("RSS max [MiB]", "peak_rss_max_bytes", "mib"), ("RSS sum [MiB]", "peak_rss_sum_bytes", "mib"),
     ("load", "load_before", "f1"),
 ]
-SETUP_PHASES = ["mesh", "assembly", "factorization", "B and G", "coarse setup"]
+# Set-up phases of a report.json without the timing tree (setup_phases reads them from the tree).
+SETUP_PHASES = ["mesh", "assembly", "factorization", "B and G", "explicit F", "coarse setup", "orthonormal coarse",
+                "preconditioner setup"]
+SETUP_EXCLUDED = ("dual setup", "other")
 
 
 def with_setup(r):
-    vals = [num(r.get(phase_column(p, "max"))) for p in SETUP_PHASES]
+    """The row with "setup": its setup_max, or for a CSV written before that column the sum
+    of the flat set-up phases it has (explicit F included)."""
     r = dict(r)
-    r["setup"] = cell(sum(vals)) if all(v is not None for v in vals) else ""
+    if num(r.get("setup_max")) is not None:
+        r["setup"] = r["setup_max"]
+        return r
+    vals = [num(r.get(phase_column(p, "max"))) for p in SETUP_PHASES]
+    vals = [v for v in vals if v is not None]
+    r["setup"] = cell(sum(vals)) if vals else ""
     return r
 
 
@@ -512,7 +556,8 @@ def summary_table(rows):
         lines.append("| " + " | ".join(cells) + " |")
     failed = [r for r in rows if r.get("exit_status") != "0"]
     notes = ["", "Medians over the runs that exited 0; times are the max over ranks (the critical path);",
-             "setup = mesh + assembly + factorization + B and G + coarse setup; spread = (max - min)/median",
+             "setup = the phases before the solve except dual setup (mesh, assembly, factorization, B and G,",
+             "explicit F, coarse setup, preconditioner setup; CSV setup_phases); spread = (max - min)/median",
              "of the total time over the repetitions; rec new/std: the two reconstructions (Eq. 24 / Eq. 10);",
              "load: the 1-minute load average before the run (above the rank count: other jobs shared the cores)."]
     for r in failed:
@@ -981,8 +1026,9 @@ def submit_slurm(args, plan, out, program):
         reps = sorted(reps)
         old = [j for j in data["jobs"] if j["member"] == name and j["ranks"] == np_ and set(j["reps"]) & set(reps)]
         if old and current[id(old[0])] != "not submitted":
-            hint = " (tools/campaign.py --resubmit failed --out %s sends it again)" % out if current[id(old[0])] \
-                not in ("pending", "running", "completed", "unknown") else ""
+            hint = ""
+            if current[id(old[0])] not in ("pending", "running", "completed", "unknown"):
+                hint = " (%s --resubmit failed --out %s sends it again)" % (TOOL, shlex.quote(out))
             print("campaign: %s np%d: job %s is %s, not submitted again%s" % (
                 name, np_, old[0].get("job_id"), current[id(old[0])], hint))
             kept += 1
@@ -1014,7 +1060,7 @@ def submit_slurm(args, plan, out, program):
     if not args.dry_run:
         print("campaign: %d jobs submitted, %d already there; jobs in %s" % (submitted, kept,
                                                                            os.path.join(out, JOBS_FILE)))
-        print("campaign: tools/campaign.py --status %s  /  --collect %s [--wait]" % (out, out))
+        print("campaign: %s --status %s  /  --collect %s [--wait]" % (TOOL, shlex.quote(out), shlex.quote(out)))
     return 0
 
 

@@ -7,8 +7,9 @@
     tools/plots.py hertz RUN_OUT_DIR_OR_H5                 contact pressure against the Hertz solution
 
 CAMPAIGN is a campaign directory (tools/campaign.py --out) or its campaign.csv.
-Every subcommand writes its PNG(s) under --figures (default docs/figures/),
-prints a Markdown table of what it plotted, and takes --help. Times are the
+Every subcommand writes its PNG(s) next to its data (the folder of the first
+CAMPAIGN, of the run's .h5) or under --figures DIR, prints a Markdown table of
+what it plotted, and takes --help. Times are the
 max over ranks; over repetitions the median is plotted, with the min-max range
 as error bars (--stat min plots the fastest repetition instead, the robust
 choice on a shared machine); iteration counts do not depend on the repetition.
@@ -16,7 +17,7 @@ Only runs that exited 0 are plotted, except in `tolerance`, where runs that
 stopped on the KKT check (exit 4) are plotted too (a loose tolerance may fail
 it; its KKT residual is what the figure shows).
 
-Examples (repository root):
+Examples (repository root; --figures docs/figures replaces the repository's figures):
     tools/plots.py weak output/campaigns/weak_h4 output/campaigns/weak_h8
     tools/plots.py reconstruction output/campaigns/weak_h4 output/campaigns/weak_h8
     tools/plots.py tolerance output/campaigns/tol_block --name tolerance_block
@@ -42,12 +43,17 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-FIGURES = os.path.join(ROOT, "docs", "figures")
 MARKERS = "osD^v<>p*h"
 
-# Phases shown in the weak-scaling time figure: label -> timer names summed (max over ranks).
+# Set-up phases of a campaign.csv written before its setup_max column (tools/campaign.py SETUP_PHASES).
+SETUP_PHASES = ["mesh", "assembly", "factorization", "B and G", "explicit F", "coarse setup", "orthonormal coarse",
+                "preconditioner setup"]
+
+# Phases shown in the weak-scaling time figure: label -> timer names summed (max over ranks);
+# SETUP: tools/campaign.py's set-up, every phase before the solve except the dual set-up.
+SETUP = "setup"
 PHASE_GROUPS = [
-    ("set-up (mesh, K, K^+, B, G, GG^T)", ["mesh", "assembly", "factorization", "B and G", "coarse setup"]),
+    ("set-up (mesh, K, K^+, B, G, explicit F, GG^T)", SETUP),
     ("factorization of K^s", ["factorization"]),
     ("dual set-up (d, lambda~, ||PFP||)", ["dual setup"]),
     ("SMALBE/MPRGP solve", ["solve"]),
@@ -64,8 +70,19 @@ def phase_column(phase, stat):
     return "t_%s_%s" % (re.sub(r"[^a-z0-9]+", "_", phase.lower()).strip("_"), stat)
 
 
+def campaign_csv(path):
+    return os.path.join(path, "campaign.csv") if os.path.isdir(path) else path
+
+
+def figures_dir(args, data):
+    """--figures, else the folder of `data` (a campaign directory or CSV, a run's .h5)."""
+    if args.figures:
+        return args.figures
+    return os.path.dirname(os.path.abspath(campaign_csv(data)))
+
+
 def load_campaign(path):
-    csv_path = os.path.join(path, "campaign.csv") if os.path.isdir(path) else path
+    csv_path = campaign_csv(path)
     if not os.path.exists(csv_path):
         sys.exit("plots: no campaign CSV at %s" % csv_path)
     with open(csv_path, newline="") as f:
@@ -100,6 +117,11 @@ def values(runs, col):
 
 
 def summed(run, phases, stat="max"):
+    if phases == SETUP:
+        if num(run.get("setup_" + stat)) is not None:
+            return num(run.get("setup_" + stat))
+        v = [x for x in (num(run.get(phase_column(p, stat))) for p in SETUP_PHASES) if x is not None]
+        return sum(v) if v else None
     v = [num(run.get(phase_column(p, stat))) for p in phases]
     return sum(v) if v and all(x is not None for x in v) else None
 
@@ -200,7 +222,7 @@ def cmd_weak(args):
     ax.set_ylim(bottom=0)
     ax.set_title("Weak scaling: SMALBE outer iterations and Hessian multiplications")
     ax.legend(fontsize=7)
-    save(fig, args.figures, args.name + "_iterations")
+    save(fig, figures_dir(args, args.campaigns[0]), args.name + "_iterations")
 
     n = len(families)
     fig, axes = plt.subplots(1, n, figsize=(5.6 * n, 4.4), squeeze=False, sharey=True)
@@ -224,7 +246,7 @@ def cmd_weak(args):
             ax.set_ylabel("time [s] (max over ranks; %s, min-max of repetitions)" % CENTRE["stat"])
         ax.legend(fontsize=7)
     fig.suptitle("Weak scaling: time per phase")
-    save(fig, args.figures, args.name + "_times")
+    save(fig, figures_dir(args, args.campaigns[0]), args.name + "_times")
 
 
 # ---------------------------------------------------------------- (b) reconstruction
@@ -265,7 +287,7 @@ def cmd_reconstruction(args):
     ax.set_ylabel("seconds (max over ranks; %s, min-max of repetitions)" % CENTRE["stat"])
     ax.set_title("Rigid body amplitudes: cost of the two reconstructions")
     ax.legend(fontsize=7)
-    save(fig, args.figures, args.name)
+    save(fig, figures_dir(args, args.campaigns[0]), args.name)
 
 
 # ---------------------------------------------------------------- (c) tolerance sweep
@@ -373,7 +395,7 @@ def cmd_tolerance(args):
                     a.annotate("%.0e" % tol, (xv, yv), textcoords="offset points", xytext=(4, 4), fontsize=7)
     fig.suptitle("%s: speed against accuracy (points: solver tol; %s)" % (
         name, "error against the exact solution" if mode == "exact" else ref_label), fontsize=10)
-    save(fig, args.figures, args.name or "tolerance_" + name)
+    save(fig, figures_dir(args, args.campaign), args.name or "tolerance_" + name)
     print("| tol | outer | Hessian | %s time [s] | spread | largest KKT residual | error (%s) | exit |" % (
         args.time, "exact" if mode == "exact" else "reference"))
     print("|---:|---:|---:|---:|---:|---:|---:|---|")
@@ -431,7 +453,7 @@ def cmd_hertz(args):
             label="Hertz: F = %.4g N, a = %.4g mm, p0 = %.4g MPa" % (force, a, p0))
     sel = r <= rr[-1]
     ax.plot(r[sel], pc[sel], "o", ms=3, color="C0", alpha=0.7,
-            label="computed, %d contact nodes (h = %.3g mm)" % (sel.sum(), h))
+            label="computed: %d nodes in contact (p > 0) of %d shown (h = %.3g mm)" % (active.sum(), sel.sum(), h))
     ax.axvline(a, color="k", ls=":", lw=0.8)
     ax.axvline(r_active, color="C0", ls=":", lw=0.8)
     ax.set_xlabel("r: distance from the sphere axis [mm]")
@@ -440,13 +462,14 @@ def cmd_hertz(args):
         case["output"]["run_name"], estar, radius), fontsize=10)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
-    save(fig, args.figures, args.name)
+    save(fig, figures_dir(args, path), args.name)
     print("| quantity | Hertz | computed | computed / Hertz |")
     print("|---|---:|---:|---:|")
     print("| total force F [N] | (the computed F) | %.5g | |" % force)
     print("| contact radius a [mm] | %.4g | %.4g (last active node); next node %.4g | %.3f |" % (
         a, r_active, r_next, r_active / a))
     print("| max pressure p0 [MPa] | %.5g | %.5g | %.4f |" % (p0, pmax, pmax / p0))
+    print("| nodes in contact (p > 0) | | %d | |" % active.sum())
     print("| rms(p - p_Hertz)/p0 over r < 0.9a | | %.3g | |" % rms)
     print("h = %.4g mm, a/h = %.2f; a/R = %.3f, a/Lx = %.3f (Hertz assumes both small)" % (
         h, a / h, a / radius, a / lx))
@@ -456,8 +479,9 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0], epilog=__doc__.split("\n", 2)[2],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     def common(parser, default):  # accepted before or after the subcommand
-        parser.add_argument("--figures", default=default if default is not None else FIGURES,
-                            help="output folder of the PNGs (default docs/figures)")
+        parser.add_argument("--figures", default=default if default is not None else "",
+                            help="output folder of the PNGs (default: the folder of the data, the first "
+                                 "campaign's or the run's)")
         parser.add_argument("--stat", choices=["median", "min"], default=default if default is not None else "median",
                             help="value plotted for repeated times (default median; min is more robust on a "
                                  "shared machine); error bars always span min..max")
