@@ -746,7 +746,7 @@ contains
   !> x = A^{-1} b for local coarse blocks b (6*nlocal), A the factorized
   !> matrix, or with a low-rank update (set_update) A + V V^T by Woodbury's
   !> formula: x = A^{-1} b - W C^{-1} (V^T A^{-1} b). Collective.
-  subroutine solve(this, b, x)
+  recursive subroutine solve(this, b, x)
     class(coarse_problem_t), intent(inout) :: this
     real(dp), intent(in) :: b(:)
     real(dp), intent(out) :: x(:)
