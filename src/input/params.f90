@@ -854,12 +854,8 @@ contains
   !> The ordering of the subdomain factorizations that `&solver local_ordering`
   !> asks for, when the largest subdomain (or cluster) of the run has
   !> `max_ndof` dofs: 'amd' and 'metis' as given; 'auto' (the default) is
-  !> MUMPS's AMD up to amd_max_dofs dofs and METIS nested dissection above.
-  !> Measured (docs/RESULTS.md "Local ordering: AMD on small subdomains (issue
-  !> 14, session 13)", distorted and METIS cubes of 64 subdomains, 2 ranks):
-  !> AMD 4-6% less total time at 4^3 and 6^3 elements per subdomain (375 and
-  !> 1029 dofs: no METIS call per subdomain, the same factor and solve times),
-  !> METIS 7% less at 8^3 (2187 dofs: its factors make the solves faster).
+  !> MUMPS's AMD up to amd_max_dofs dofs (no METIS call per subdomain) and
+  !> METIS nested dissection above (its factors make the solves faster).
   pure function local_ordering_for(requested, max_ndof) result(used)
     character(len=*), intent(in) :: requested
     integer(i8), intent(in) :: max_ndof
@@ -875,8 +871,7 @@ contains
   !> default) is the dense split K^+ (kplus_dense) up to dense_max_dofs dofs
   !> in plain TFETI, one MUMPS factorization per rank ('block') otherwise.
   !> Where the subdomains form classes of congruent ones (share_subdomains),
-  !> K^+ is shared per class whatever this says. Measured in docs/RESULTS.md
-  !> "Dense local solver (issue 14, session 14)".
+  !> K^+ is shared per class whatever this says.
   pure function local_solver_for(requested, max_ndof, hybrid) result(used)
     character(len=*), intent(in) :: requested
     integer(i8), intent(in) :: max_ndof
@@ -900,17 +895,15 @@ contains
     p%mesh%cluster_choice = reason
   end subroutine resolve_cluster
 
-  !> The automatic choice of hybrid TFETI clusters (docs/INPUT.md `cluster`,
-  !> measured in docs/RESULTS.md "Automatic clusters (issue 14, session 9)").
+  !> The automatic choice of hybrid TFETI clusters (docs/INPUT.md `cluster`).
   !> Clusters pay where the coarse problem dominates: subdomains of at most
   !> `auto_max_nel` = 2 elements per direction (H/h <= 2), at least
   !> 512 (H/h)^3 of them (H/h the largest entry of nel: 512 subdomains of one
-  !> element, 4096 of 2^3; measured to lose at 64 of one element and at 64
-  !> and 512 of 2^3, to break even at 1728 of 2^3). Then, per direction, the
+  !> element, 4096 of 2^3; fewer do not pay). Then, per direction, the
   !> largest divisor c of nsub with nel*c <= `auto_cluster_edge` = 4
   !> elements along the cluster's edge, reduced (largest entry first) until
   !> every rank holds at least `auto_clusters_per_rank` = 4 clusters (a
-  !> balance guard, not measured: a cluster lives on one rank). [1, 1, 1]
+  !> balance guard: a cluster lives on one rank). [1, 1, 1]
   !> (plain TFETI) whenever a requirement of hybrid TFETI fails (box
   !> decomposition, uniform material, no Dirichlet preconditioner, implicit
   !> F) or the rule does not fire; `reason` says which.

@@ -42,7 +42,7 @@
 !> (`stopped_loose`: x, g, muhat a face iterate, not the face solution),
 !> else the same CG run goes on (no restart, no Krylov space lost) and checks
 !> again each time the measure has dropped by another factor `loose`.
-!> The give-up rule of 3. with loose checks (issue 14, session 8): before the
+!> The give-up rule of 3. with loose checks: before the
 !> first loose check the extrapolation aims at the loose target (the run's
 !> next decision point), not at target; once a loose check has found no
 !> change the face is trusted (`trusted`): no give-up any more, and the run

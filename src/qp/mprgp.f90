@@ -40,8 +40,7 @@
 !> a_norm, a_norm is raised to it and alpha_bar = alpha_scale/a_norm follows
 !> (counted in n_norm_updates, kept across calls). It restores
 !> alpha_bar <= 2/||A|| when the caller's estimate is low; with the power
-!> method that FETI used before Lanczos (within 0.4% of ||A||) it never
-!> triggered in the hard cases (docs/RESULTS.md, "Hessian norm estimate").
+!> method (within 0.4% of ||A||) it does not trigger.
 !>
 !> The stopping rule is an object (`inner_stop_t`, module inner_solver) asked every iteration with
 !> the current x and ||g^P||, so that SMALBE can stop the inner loop on
