@@ -6,9 +6,8 @@
 !> (id, seed) alone (independent of the rank count). Poisson's ratio is the same
 !> everywhere.
 module materials
-  use kinds, only: dp, ip
+  use kinds, only: dp, ip, name_len
   use errors, only: fatal_error
-  use params, only: params_t
   use box_mesh, only: hash_unit
   use decomposition, only: decomposition_t
   implicit none
@@ -16,20 +15,29 @@ module materials
 
   public :: subdomain_material
 
+  !> The settings of `&material` (docs/INPUT.md).
+  type, public :: material_settings_t
+    real(dp) :: young = 2.1e5_dp              !< Young's modulus [MPa]
+    real(dp) :: poisson = 0.3_dp              !< Poisson's ratio
+    character(len=name_len) :: variation = 'none'  !< 'none' | 'checkerboard' | 'random'
+    real(dp) :: contrast = 1                  !< ratio of largest to smallest young
+    integer(ip) :: seed = 1                   !< seed of 'random'
+  end type material_settings_t
+
 contains
 
   !> Material of subdomain `id`.
-  subroutine subdomain_material(p, dec, id, young, poisson)
-    type(params_t), intent(in) :: p
+  subroutine subdomain_material(material, dec, id, young, poisson)
+    type(material_settings_t), intent(in) :: material
     type(decomposition_t), intent(in) :: dec
     integer(ip), intent(in) :: id
     real(dp), intent(out) :: young, poisson
     integer(ip) :: parity, r, ijk(3)
 
-    poisson = p%material%poisson
-    select case (trim(p%material%variation))
+    poisson = material%poisson
+    select case (trim(material%variation))
     case ('none')
-      young = p%material%young
+      young = material%young
     case ('checkerboard')
       if (dec%method == 'box') then
         r = id - 1
@@ -41,11 +49,11 @@ contains
       else
         parity = mod(id - 1, 2)
       end if
-      young = p%material%young*p%material%contrast**parity
+      young = material%young*material%contrast**parity
     case ('random')
-      young = p%material%young*p%material%contrast**hash_unit(id, 0_ip, p%material%seed)
+      young = material%young*material%contrast**hash_unit(id, 0_ip, material%seed)
     case default
-      call fatal_error('subdomain_material: unknown &material variation '//trim(p%material%variation))
+      call fatal_error('subdomain_material: unknown &material variation '//trim(material%variation))
     end select
   end subroutine subdomain_material
 end module materials

@@ -9,7 +9,7 @@ submodule(feti_operators) feti_builder
   use kinds, only: MPI_INT_I8, MPI_INT_IP, MPI_REAL_DP
   use decomposition, only: build_decomposition
   use subdomain, only: build_subdomain
-  use clusters, only: is_hybrid, unit_params, build_cluster
+  use clusters, only: is_hybrid, unit_mesh, build_cluster
   use assembly, only: assemble_subdomain
   use coarse_problem, only: choose_coarse_ranks
   use mpi_f08, only: MPI_Comm_size
@@ -40,13 +40,13 @@ contains
     call check_coarse_ranks()
 
     call timer_start('mesh')
-    this%hybrid = is_hybrid(p)
+    this%hybrid = is_hybrid(p%mesh)
     if (this%hybrid) then
       ! hybrid TFETI: the units are the clusters (src/mesh/clusters.f90)
-      call build_decomposition(p, comm, this%sub_dec)
-      call build_decomposition(unit_params(p), comm, this%dec)
+      call build_decomposition(p%mesh, comm, this%sub_dec)
+      call build_decomposition(unit_mesh(p%mesh), comm, this%dec)
     else
-      call build_decomposition(p, comm, this%dec)
+      call build_decomposition(p%mesh, comm, this%dec)
     end if
     this%n_local_subs = size(this%dec%local_subdomains, kind=ip)
     allocate (this%subs(this%n_local_subs))
@@ -70,7 +70,7 @@ contains
 
     call timer_start('assembly')
     do ls = 1, this%n_local_subs
-      call assemble_subdomain(p, this%dec, this%subs(ls))
+      call assemble_subdomain(p%material, p%load, this%dec, this%subs(ls))
     end do
     call timer_stop('assembly')
     call memory_mark('assembly')

@@ -12,6 +12,9 @@ module params
   use errors, only: collective_error, exit_input_error, fatal_error
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast, MPI_BYTE, MPI_INTEGER, MPI_CHARACTER
   use smalbe, only: smalbe_settings_t
+  use mesh_settings, only: mesh_settings_t
+  use materials, only: material_settings_t
+  use assembly, only: load_settings_t
   implicit none
   private
 
@@ -24,39 +27,6 @@ module params
   integer(i8), parameter, public :: dense_max_dofs = 500
 
   integer, parameter :: msg_len = 1024
-
-  type, public :: mesh_params_t
-    integer(ip) :: nsub(3) = [2, 2, 2]        !< subdomains per direction
-    integer(ip) :: nel(3) = [4, 4, 4]         !< elements per subdomain per direction
-    real(dp) :: lengths(3) = [1, 1, 1]        !< box size Lx, Ly, Lz [mm]
-    real(dp) :: distortion = 0                !< inner node offset, fraction of h
-    integer(ip) :: distortion_seed = 1        !< seed of the node offsets
-    character(len=name_len) :: decomposition = 'box'  !< 'box' | 'metis'
-    character(len=name_len) :: mapping = 'block'      !< subdomains to ranks: 'block' | 'metis'
-    !> hybrid TFETI: subdomains per cluster per direction (1,1,1: plain TFETI;
-    !> 0,0,0: chosen by `auto_cluster` when `read_params` reads the input; a
-    !> params_t made in code and never resolved keeps 0,0,0 = plain TFETI)
-    integer(ip) :: cluster(3) = [0, 0, 0]
-    !> decomposition = 'metis': elements per block edge of the block grid METIS
-    !> partitions (0: automatic, see src/mesh/decomposition.f90)
-    integer(ip) :: metis_block = 0
-    !> not namelist variables: set by `resolve_cluster` (read_params) when
-    !> `cluster` was 0,0,0: then `cluster` holds the choice, and the reason
-    logical :: cluster_auto = .false.
-    character(len=160) :: cluster_choice = ''
-  end type mesh_params_t
-
-  type, public :: material_params_t
-    real(dp) :: young = 2.1e5_dp              !< Young's modulus [MPa]
-    real(dp) :: poisson = 0.3_dp              !< Poisson's ratio
-    character(len=name_len) :: variation = 'none'  !< 'none' | 'checkerboard' | 'random'
-    real(dp) :: contrast = 1                  !< ratio of largest to smallest young
-    integer(ip) :: seed = 1                   !< seed of 'random'
-  end type material_params_t
-
-  type, public :: load_params_t
-    real(dp) :: top_pressure = 0              !< pressure on z = Lz, positive pushes down [MPa]
-  end type load_params_t
 
   type, public :: boundary_params_t
     logical :: top_dirichlet = .true.         !< prescribe u on z = Lz
@@ -133,9 +103,9 @@ module params
   !> All parameters of a run.
   type, public :: params_t
     character(len=path_len) :: file = ''
-    type(mesh_params_t) :: mesh
-    type(material_params_t) :: material
-    type(load_params_t) :: load
+    type(mesh_settings_t) :: mesh
+    type(material_settings_t) :: material
+    type(load_settings_t) :: load
     type(boundary_params_t) :: boundary
     type(obstacle_params_t) :: obstacle
     type(solver_params_t) :: solver
@@ -580,12 +550,12 @@ contains
     if (.not. reading) return
     select case (name)
     case ('mesh')
-      p%mesh = mesh_params_t(nsub, nel, lengths, distortion, distortion_seed, &
+      p%mesh = mesh_settings_t(nsub, nel, lengths, distortion, distortion_seed, &
                              lower(decomposition), lower(mapping), cluster, metis_block)
     case ('material')
-      p%material = material_params_t(young, poisson, lower(variation), contrast, seed)
+      p%material = material_settings_t(young, poisson, lower(variation), contrast, seed)
     case ('load')
-      p%load = load_params_t(top_pressure)
+      p%load = load_settings_t(top_pressure)
     case ('boundary')
       p%boundary = boundary_params_t(top_dirichlet, top_displacement, symmetry_x0, symmetry_y0)
     case ('obstacle')
