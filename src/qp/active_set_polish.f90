@@ -20,10 +20,10 @@
 !> rows nearest their bound active (predicted_rows); with `release_share` > 0
 !> the first round of a polish releases only the wrong-sign rows whose
 !> gradient is at least that share of the largest (released_rows).
-!> At most once per distinct active set and polish_max times per solve.
+!> At most once per distinct active set and `max_count` times per solve.
 !> `settle` > 0: an outer iteration counts as settled when the set changed on
 !> at most that fraction of the bounded rows; a polish given up at its first
-!> face then does not count toward polish_max, and the next waits until the
+!> face then does not count toward max_count, and the next waits until the
 !> products have doubled. Each face solve at most polish_steps and at most
 !> max(polish_min_steps, the products spent so far) CG steps, to
 !> polish_target times the outer test's bound; a face solve whose first
@@ -50,9 +50,8 @@ module active_set_polish
 
   public :: polish_cycling, face_signature, predicted_rows, released_rows, revisit_of_cut_short
 
-  !> at most this many polishes per solve, each face solve at most polish_steps CG steps,
-  !> stopped at polish_target times the outer test's bound of g^P
-  integer(ip), parameter, public :: polish_max = 3
+  !> each face solve at most polish_steps CG steps, stopped at polish_target times the outer
+  !> test's bound of g^P
   integer(ip), parameter, public :: polish_steps = 500
   integer(ip), parameter, public :: polish_min_steps = 30
   real(dp), parameter, public :: polish_target = 0.5_dp
@@ -65,6 +64,7 @@ module active_set_polish
     !> > 0: polish once the active set has not changed for this many outer iterations; 0: never
     integer(ip) :: window = 1
     integer(ip) :: rounds = 8                  !< face solves per polish at most
+    integer(ip) :: max_count = 3               !< polishes per solve at most (the polish first aside)
     logical :: release = .true.                !< release wrong-sign active rows within the polish
     !> settled: the active set changed on at most this fraction of the bounded rows (0: not at all)
     real(dp) :: settle = 0.15_dp
@@ -143,6 +143,10 @@ contains
       variable = 'polish_rounds'
       rule = 'must be >= 1'
       write (buf, '(i0)') self%rounds
+    else if (self%max_count < 0) then
+      variable = 'polish_max'
+      rule = 'must be >= 0'
+      write (buf, '(i0)') self%max_count
     else if (.not. (self%settle >= 0 .and. self%settle < 1)) then
       variable = 'polish_settle'
       rule = 'must be in [0, 1) (0: no change)'
@@ -170,16 +174,18 @@ contains
     character(len=*), intent(in) :: group
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
-    integer(ip) :: polish_window, polish_rounds, polish_predict
+    integer(ip) :: polish_window, polish_rounds, polish_predict, polish_max
     real(dp) :: polish_settle, polish_loose, polish_release_share
     logical :: polish_release, polish_first
-    namelist /solver/ polish_window, polish_rounds, polish_release, polish_settle, polish_loose, polish_predict, &
-      polish_release_share, polish_first
+    namelist /solver/ polish_window, polish_rounds, polish_max, polish_release, polish_settle, polish_loose, &
+      polish_predict, polish_release_share, polish_first
+    polish_max = self%max_count
     polish_window = self%window; polish_rounds = self%rounds; polish_release = self%release
     polish_settle = self%settle; polish_loose = self%loose; polish_predict = self%predict
     polish_release_share = self%release_share; polish_first = self%first
     read (group, nml=solver, iostat=status, iomsg=msg)
     if (status /= 0) return
+    self%max_count = polish_max
     self%window = polish_window; self%rounds = polish_rounds; self%release = polish_release
     self%settle = polish_settle; self%loose = polish_loose; self%predict = polish_predict
     self%release_share = polish_release_share; self%first = polish_first
@@ -191,11 +197,12 @@ contains
     character(len=*), intent(out) :: lines(:)
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
-    integer(ip) :: polish_window, polish_rounds, polish_predict
+    integer(ip) :: polish_window, polish_rounds, polish_predict, polish_max
     real(dp) :: polish_settle, polish_loose, polish_release_share
     logical :: polish_release, polish_first
-    namelist /solver/ polish_window, polish_rounds, polish_release, polish_settle, polish_loose, polish_predict, &
-      polish_release_share, polish_first
+    namelist /solver/ polish_window, polish_rounds, polish_max, polish_release, polish_settle, polish_loose, &
+      polish_predict, polish_release_share, polish_first
+    polish_max = self%max_count
     polish_window = self%window; polish_rounds = self%rounds; polish_release = self%release
     polish_settle = self%settle; polish_loose = self%loose; polish_predict = self%predict
     polish_release_share = self%release_share; polish_first = self%first
@@ -326,7 +333,7 @@ contains
   contains
     logical function ready()
       ready = self%n_stable >= self%settings%window .and. .not. self%polished_set .and. &
-              self%n_polish - self%n_given_up < polish_max .and. n_hessian >= self%hessian_wait .and. &
+              self%n_polish - self%n_given_up < self%settings%max_count .and. n_hessian >= self%hessian_wait .and. &
               max_hessian - n_hessian > 2
     end function ready
   end function due
