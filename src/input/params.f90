@@ -458,16 +458,14 @@ contains
     character(len=:), allocatable :: rest, tail(:)
     integer :: k, i
     logical :: reading
-    integer(ip) :: nsub(3), nel(3), cluster(3), metis_block, distortion_seed, seed, power_iterations, coarse_ranks
-    real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
+    integer(ip) :: power_iterations, coarse_ranks
+    real(dp) :: top_pressure, top_displacement(3), &
                 radius, gap, rho_scale, coarse_blr, regularization, active_tol, kkt_tol, preconditioner_switch
-    character(len=name_len) :: decomposition, mapping, variation, shape, coarse, &
+    character(len=name_len) :: shape, coarse, &
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
                                f_action, f_storage, share_subdomains, preconditioner, coarse_factor
     character(len=path_len) :: directory
     logical :: top_dirichlet, symmetry_x0, symmetry_y0, write_hdf5, write_report, coarse_ooc
-    namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping, cluster, metis_block
-    namelist /material/ young, poisson, variation, contrast, seed
     namelist /load/ top_pressure
     namelist /boundary/ top_dirichlet, top_displacement, symmetry_x0, symmetry_y0
     namelist /obstacle/ shape, radius, gap
@@ -485,17 +483,14 @@ contains
     if (present(written)) written = ''
     select case (name)
     case ('mesh')
-      nsub = p%mesh%nsub; nel = p%mesh%nel; lengths = p%mesh%lengths
-      distortion = p%mesh%distortion; distortion_seed = p%mesh%distortion_seed
-      decomposition = p%mesh%decomposition; mapping = p%mesh%mapping; cluster = p%mesh%cluster
-      metis_block = p%mesh%metis_block
-      if (reading) read (group_text, nml=mesh, iostat=status, iomsg=msg)
-      if (.not. reading) write (written, nml=mesh, delim='quote', iostat=status, iomsg=msg)
+      ! the group's owner reads and writes it
+      if (reading) call p%mesh%read_namelist(group_text, status, msg)
+      if (.not. reading) call p%mesh%write_namelist(written, status, msg)
+      return
     case ('material')
-      young = p%material%young; poisson = p%material%poisson
-      variation = p%material%variation; contrast = p%material%contrast; seed = p%material%seed
-      if (reading) read (group_text, nml=material, iostat=status, iomsg=msg)
-      if (.not. reading) write (written, nml=material, delim='quote', iostat=status, iomsg=msg)
+      if (reading) call p%material%read_namelist(group_text, status, msg)
+      if (.not. reading) call p%material%write_namelist(written, status, msg)
+      return
     case ('load')
       top_pressure = p%load%top_pressure
       if (reading) read (group_text, nml=load, iostat=status, iomsg=msg)
@@ -549,11 +544,6 @@ contains
     end select
     if (.not. reading) return
     select case (name)
-    case ('mesh')
-      p%mesh = mesh_settings_t(nsub, nel, lengths, distortion, distortion_seed, &
-                             lower(decomposition), lower(mapping), cluster, metis_block)
-    case ('material')
-      p%material = material_settings_t(young, poisson, lower(variation), contrast, seed)
     case ('load')
       p%load = load_settings_t(top_pressure)
     case ('boundary')
@@ -691,27 +681,9 @@ contains
     status = 0
     msg = ''
     associate (m => p%mesh)
-      if (any(m%nsub < 1)) call fail('mesh', 'nsub', 'each entry must be >= 1', ints(m%nsub))
-      if (any(m%nel < 1)) call fail('mesh', 'nel', 'each entry must be >= 1', ints(m%nel))
-      if (any(m%lengths <= 0)) call fail('mesh', 'lengths', 'each entry must be > 0', reals(m%lengths))
-      if (m%distortion < 0 .or. m%distortion >= 0.5_dp) &
-        call fail('mesh', 'distortion', 'must be in [0, 0.5)', reals([m%distortion]))
-      if (.not. one_of(m%decomposition, [character(len=8) :: 'box', 'metis'])) &
-        call fail('mesh', 'decomposition', "must be 'box' or 'metis'", m%decomposition)
-      if (.not. one_of(m%mapping, [character(len=8) :: 'block', 'metis'])) &
-        call fail('mesh', 'mapping', "must be 'block' or 'metis'", m%mapping)
-      if (.not. (all(m%cluster == 0) .or. all(m%cluster >= 1))) call fail('mesh', 'cluster', &
-        'each entry must be >= 1, or all three 0 (automatic choice)', ints(m%cluster))
-      if (m%metis_block < 0) call fail('mesh', 'metis_block', &
-        'must be 0 (automatic) or a block edge b >= 1 in elements', ints([m%metis_block]))
-      if (status == 0 .and. all(m%cluster >= 1)) then     ! (no short-circuit in Fortran: mod only with cluster >= 1)
-        if (any(mod(m%nsub, m%cluster) /= 0)) &
-          call fail('mesh', 'cluster', 'must divide nsub in every direction (nsub = '//ints(m%nsub)//')', &
-                    ints(m%cluster))
-      end if
+      call m%check(variable, rule, got)
+      if (len(variable) > 0) call fail('mesh', variable, rule, got)
       if (any(m%cluster > 1)) then
-        if (m%decomposition /= 'box') call fail('mesh', 'cluster', &
-          "> 1 (hybrid TFETI) needs decomposition = 'box'", ints(m%cluster))
         if (p%material%variation /= 'none') call fail('mesh', 'cluster', &
           "> 1 (hybrid TFETI) needs &material variation = 'none'", ints(m%cluster))
         if (p%solver%preconditioner == 'dirichlet') call fail('mesh', 'cluster', &
@@ -724,19 +696,9 @@ contains
           "> 1 (hybrid TFETI) works with &solver local_solver = 'auto', 'block' or 'subdomain', not 'dense'", &
           ints(m%cluster))
       end if
-      if (status == 0 .and. product(int(m%nsub, 8)) * product(int(m%nel, 8)) > 2**27) &
-        call fail('mesh', 'nsub, nel', 'give at most 2**27 elements in all', &
-                  ints(m%nsub)//' x '//ints(m%nel))
     end associate
-    associate (m => p%material)
-      if (m%young <= 0) call fail('material', 'young', 'must be > 0', reals([m%young]))
-      if (m%poisson <= -1 .or. m%poisson >= 0.5_dp) &
-        call fail('material', 'poisson', 'must be in (-1, 0.5)', reals([m%poisson]))
-      if (.not. one_of(m%variation, [character(len=12) :: 'none', 'checkerboard', 'random'])) &
-        call fail('material', 'variation', "must be 'none', 'checkerboard' or 'random'", m%variation)
-      if (m%contrast < 1 .or. m%contrast > 1.0e12_dp) &
-        call fail('material', 'contrast', 'must be in [1, 1e12]', reals([m%contrast]))
-    end associate
+    call p%material%check(variable, rule, got)
+    if (len(variable) > 0) call fail('material', variable, rule, got)
     associate (b => p%boundary)
       ! frictionless contact holds u_z only: without the top face, the symmetry planes must hold
       ! the x and y translations and the rotation about z, and an obstacle the z translation
