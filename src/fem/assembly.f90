@@ -19,12 +19,42 @@ module assembly
   public :: assemble_subdomain, assemble_stiffness, add_face_traction, subdomain_von_mises, &
             face_tributary_areas, element_displacements
 
-  !> The settings of `&load` (docs/INPUT.md).
+  !> The settings of `&load` (docs/INPUT.md): the default and the namelist
+  !> variables (params hands the group over).
   type, public :: load_settings_t
     real(dp) :: top_pressure = 0              !< pressure on z = Lz, positive pushes down [MPa]
+  contains
+    procedure :: read_namelist => load_settings_read
+    procedure :: write_namelist => load_settings_write
   end type load_settings_t
 
 contains
+
+  !> Read the group text `group` ('&load ... /').
+  subroutine load_settings_read(self, group, status, msg)
+    class(load_settings_t), intent(inout) :: self
+    character(len=*), intent(in) :: group
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    real(dp) :: top_pressure
+    namelist /load/ top_pressure
+    top_pressure = self%top_pressure
+    read (group, nml=load, iostat=status, iomsg=msg)
+    if (status == 0) self%top_pressure = top_pressure
+  end subroutine load_settings_read
+
+  !> Write the group as the namelist '&load ... /'.
+  subroutine load_settings_write(self, lines, status, msg)
+    class(load_settings_t), intent(in) :: self
+    character(len=*), intent(out) :: lines(:)
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    real(dp) :: top_pressure
+    namelist /load/ top_pressure
+    top_pressure = self%top_pressure
+    lines = ''
+    write (lines, nml=load, delim='quote', iostat=status, iomsg=msg)
+  end subroutine load_settings_write
 
   !> Material, K, f (pressure load%top_pressure on z = Lz, pushing in -z)
   !> and the orthonormal rigid body modes R (about sub%centroid) of `sub`,

@@ -459,14 +459,13 @@ contains
     integer :: k, i
     logical :: reading
     integer(ip) :: power_iterations, coarse_ranks
-    real(dp) :: top_pressure, top_displacement(3), &
+    real(dp) :: top_displacement(3), &
                 radius, gap, rho_scale, coarse_blr, regularization, active_tol, kkt_tol, preconditioner_switch
     character(len=name_len) :: shape, coarse, &
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
                                f_action, f_storage, share_subdomains, preconditioner, coarse_factor
     character(len=path_len) :: directory
     logical :: top_dirichlet, symmetry_x0, symmetry_y0, write_hdf5, write_report, coarse_ooc
-    namelist /load/ top_pressure
     namelist /boundary/ top_dirichlet, top_displacement, symmetry_x0, symmetry_y0
     namelist /obstacle/ shape, radius, gap
     ! &solver: the variables that are not the QP solver's (solver_group hands those to it)
@@ -492,9 +491,9 @@ contains
       if (.not. reading) call p%material%write_namelist(written, status, msg)
       return
     case ('load')
-      top_pressure = p%load%top_pressure
-      if (reading) read (group_text, nml=load, iostat=status, iomsg=msg)
-      if (.not. reading) write (written, nml=load, delim='quote', iostat=status, iomsg=msg)
+      if (reading) call p%load%read_namelist(group_text, status, msg)
+      if (.not. reading) call p%load%write_namelist(written, status, msg)
+      return
     case ('boundary')
       top_dirichlet = p%boundary%top_dirichlet; top_displacement = p%boundary%top_displacement
       symmetry_x0 = p%boundary%symmetry_x0; symmetry_y0 = p%boundary%symmetry_y0
@@ -544,8 +543,6 @@ contains
     end select
     if (.not. reading) return
     select case (name)
-    case ('load')
-      p%load = load_settings_t(top_pressure)
     case ('boundary')
       p%boundary = boundary_params_t(top_dirichlet, top_displacement, symmetry_x0, symmetry_y0)
     case ('obstacle')
