@@ -11,7 +11,7 @@ module contact_run
   use memory_marks, only: memory_mark
   use params, only: params_t
   use smalbe, only: smalbe_t
-  use tfeti_dualization, only: tfeti_dualization_t, dual_solution_t, smalbe_settings
+  use tfeti_dualization, only: tfeti_dualization_t, dual_solution_t
   use feti_operators, only: feti_t
   use contact_summary, only: contact_summary_t, summarize_contact
   use hdf5_output, only: check_output_directory
@@ -54,7 +54,7 @@ contains
     call memory_mark('dual QP setup')
     ! 2. solve: SMALBE (outer) + MPRGP (inner) on the dual QP
     call log_section('SMALBE / MPRGP')
-    call solver%init_with(smalbe_settings(p%solver), dual%hessian_norm())
+    call solver%init(p%solver%smalbe, dual%hessian_norm())
     call dual%solve(solver, nu, seconds)
     call memory_mark('solve')
     ! 3. post-solve: lambda, alpha_bar (Eq. 24/25 and/or 10), u, KKT residuals

@@ -1,10 +1,10 @@
-!> Numbers as text, the one place for it (i0 formatting).
+!> Numbers as text, the one place for it (i0 formatting), and lower case.
 module text
   use kinds, only: ip, i8
   implicit none
   private
 
-  public :: str
+  public :: str, lower_case
 
   !> `n` in decimal, no blanks.
   interface str
@@ -26,4 +26,16 @@ contains
     character(len=:), allocatable :: s
     s = str_i8(int(n, i8))
   end function str_ip
+
+  !> `s` with A-Z turned into a-z.
+  pure function lower_case(s) result(r)
+    character(len=*), intent(in) :: s
+    character(len=len(s)) :: r
+    integer :: i, c
+    r = s
+    do i = 1, len(s)
+      c = iachar(s(i:i))
+      if (c >= iachar('A') .and. c <= iachar('Z')) r(i:i) = achar(c + 32)
+    end do
+  end function lower_case
 end module text

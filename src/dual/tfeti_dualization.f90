@@ -15,7 +15,6 @@ module tfeti_dualization
   use subdomain, only: subdomain_t
   use orthonormal_coarse, only: check_orthonormal_size
   use qp_problem, only: qp_problem_t, qp_solver_t
-  use smalbe, only: smalbe_settings_t
   use dual_problem, only: dual_problem_t
   use dual_problem_orth, only: dual_problem_orth_t
   use reconstruction, only: dual_gradient, alpha_standard, standard_cost_t, coarse_vector_norm
@@ -24,7 +23,6 @@ module tfeti_dualization
   implicit none
   private
 
-  public :: smalbe_settings
 
   !> What the inverse step returns: the primal and dual solution and what it
   !> cost to get u.
@@ -60,20 +58,6 @@ module tfeti_dualization
   end type tfeti_dualization_t
 
 contains
-
-  !> The SMALBE/MPRGP settings of &solver (rho_scale belongs to the problem).
-  type(smalbe_settings_t) function smalbe_settings(sp) result(s)
-    type(solver_params_t), intent(in) :: sp
-    s = smalbe_settings_t(tol=sp%tol, max_outer=sp%max_outer, max_hessian=sp%max_hessian, gamma=sp%gamma, &
-                          alpha_scale=sp%alpha_scale, expansion=sp%expansion, m_scale=sp%m_scale, &
-                          beta=sp%beta, eta_scale=sp%eta_scale, m_no_step=sp%m_no_step, &
-                          rho_growth=sp%rho_growth, rho_contraction=sp%rho_contraction, &
-                          rho_window=sp%rho_window, rho_stall=sp%rho_stall, polish_window=sp%polish_window, &
-                          polish_rounds=sp%polish_rounds, polish_release=sp%polish_release, &
-                          polish_settle=sp%polish_settle, polish_loose=sp%polish_loose, &
-                          polish_predict=sp%polish_predict, polish_first=sp%polish_first, &
-                          polish_release_share=sp%polish_release_share, monitor=sp%monitor)
-  end function smalbe_settings
 
   !> Build the FETI operators and the dual QP of the case `p` on `comm`.
   !> `this` must be a target (the dual problem points to its operators).

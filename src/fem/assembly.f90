@@ -4,7 +4,7 @@
 module assembly
   use kinds, only: dp, ip
   use errors, only: fatal_error
-  use params, only: params_t
+  use materials, only: material_settings_t
   use box_mesh, only: face_z0, face_z1
   use decomposition, only: decomposition_t
   use subdomain, only: subdomain_t
@@ -19,23 +19,59 @@ module assembly
   public :: assemble_subdomain, assemble_stiffness, add_face_traction, subdomain_von_mises, &
             face_tributary_areas, element_displacements
 
+  !> The settings of `&load` (docs/INPUT.md): the default and the namelist
+  !> variables (params hands the group over).
+  type, public :: load_settings_t
+    real(dp) :: top_pressure = 0              !< pressure on z = Lz, positive pushes down [MPa]
+  contains
+    procedure :: read_namelist => load_settings_read
+    procedure :: write_namelist => load_settings_write
+  end type load_settings_t
+
 contains
 
-  !> Material, K, f (pressure p%load%top_pressure on z = Lz, pushing in -z)
+  !> Read the group text `group` ('&load ... /').
+  subroutine load_settings_read(self, group, status, msg)
+    class(load_settings_t), intent(inout) :: self
+    character(len=*), intent(in) :: group
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    real(dp) :: top_pressure
+    namelist /load/ top_pressure
+    top_pressure = self%top_pressure
+    read (group, nml=load, iostat=status, iomsg=msg)
+    if (status == 0) self%top_pressure = top_pressure
+  end subroutine load_settings_read
+
+  !> Write the group as the namelist '&load ... /'.
+  subroutine load_settings_write(self, lines, status, msg)
+    class(load_settings_t), intent(in) :: self
+    character(len=*), intent(out) :: lines(:)
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    real(dp) :: top_pressure
+    namelist /load/ top_pressure
+    top_pressure = self%top_pressure
+    lines = ''
+    write (lines, nml=load, delim='quote', iostat=status, iomsg=msg)
+  end subroutine load_settings_write
+
+  !> Material, K, f (pressure load%top_pressure on z = Lz, pushing in -z)
   !> and the orthonormal rigid body modes R (about sub%centroid) of `sub`,
   !> whose geometry build_subdomain has filled.
-  subroutine assemble_subdomain(p, dec, sub)
-    type(params_t), intent(in) :: p
+  subroutine assemble_subdomain(material, load, dec, sub)
+    type(material_settings_t), intent(in) :: material
+    type(load_settings_t), intent(in) :: load
     type(decomposition_t), intent(in) :: dec
     type(subdomain_t), intent(inout) :: sub
 
-    call subdomain_material(p, dec, sub%id, sub%young, sub%poisson)
+    call subdomain_material(material, dec, sub%id, sub%young, sub%poisson)
     call assemble_stiffness(sub)
     if (allocated(sub%f)) deallocate (sub%f)
     allocate (sub%f(sub%ndof))
     sub%f = 0
-    if (p%load%top_pressure /= 0) &
-      call add_face_traction(dec, sub, face_z1, [0.0_dp, 0.0_dp, -p%load%top_pressure], sub%f)
+    if (load%top_pressure /= 0) &
+      call add_face_traction(dec, sub, face_z1, [0.0_dp, 0.0_dp, -load%top_pressure], sub%f)
     if (allocated(sub%R)) deallocate (sub%R)
     allocate (sub%R(sub%ndof, 6))
     call rigid_body_modes(sub%coords, sub%centroid, sub%R)

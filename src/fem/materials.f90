@@ -6,30 +6,108 @@
 !> (id, seed) alone (independent of the rank count). Poisson's ratio is the same
 !> everywhere.
 module materials
-  use kinds, only: dp, ip
+  use kinds, only: dp, ip, name_len
   use errors, only: fatal_error
-  use params, only: params_t
   use box_mesh, only: hash_unit
   use decomposition, only: decomposition_t
+  use text, only: lower_case
   implicit none
   private
 
   public :: subdomain_material
 
+  !> The settings of `&material` (docs/INPUT.md): defaults, the checks within
+  !> the group and the namelist variables (params hands the group over).
+  type, public :: material_settings_t
+    real(dp) :: young = 2.1e5_dp              !< Young's modulus [MPa]
+    real(dp) :: poisson = 0.3_dp              !< Poisson's ratio
+    character(len=name_len) :: variation = 'none'  !< 'none' | 'checkerboard' | 'random'
+    real(dp) :: contrast = 1                  !< ratio of largest to smallest young
+    integer(ip) :: seed = 1                   !< seed of 'random'
+  contains
+    procedure :: check => material_settings_check
+    procedure :: read_namelist => material_settings_read
+    procedure :: write_namelist => material_settings_write
+  end type material_settings_t
+
 contains
 
+  !> The first value out of its range: `variable` its name ('' if none),
+  !> `rule` the allowed values, `got` the value.
+  subroutine material_settings_check(self, variable, rule, got)
+    class(material_settings_t), intent(in) :: self
+    character(len=:), allocatable, intent(out) :: variable, rule, got
+    character(len=64) :: buf
+    variable = ''
+    rule = ''
+    got = ''
+    buf = ''
+    if (self%young <= 0) then
+      variable = 'young'
+      rule = 'must be > 0'
+      write (buf, '(g0.6)') self%young
+    else if (self%poisson <= -1 .or. self%poisson >= 0.5_dp) then
+      variable = 'poisson'
+      rule = 'must be in (-1, 0.5)'
+      write (buf, '(g0.6)') self%poisson
+    else if (.not. any(self%variation == [character(len=12) :: 'none', 'checkerboard', 'random'])) then
+      variable = 'variation'
+      rule = "must be 'none', 'checkerboard' or 'random'"
+      buf = self%variation
+    else if (self%contrast < 1 .or. self%contrast > 1.0e12_dp) then
+      variable = 'contrast'
+      rule = 'must be in [1, 1e12]'
+      write (buf, '(g0.6)') self%contrast
+    end if
+    got = trim(buf)
+  end subroutine material_settings_check
+
+  !> Read the group text `group` ('&material ... /'); strings lower case.
+  subroutine material_settings_read(self, group, status, msg)
+    class(material_settings_t), intent(inout) :: self
+    character(len=*), intent(in) :: group
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    real(dp) :: young, poisson, contrast
+    character(len=name_len) :: variation
+    integer(ip) :: seed
+    namelist /material/ young, poisson, variation, contrast, seed
+    young = self%young; poisson = self%poisson; variation = self%variation
+    contrast = self%contrast; seed = self%seed
+    read (group, nml=material, iostat=status, iomsg=msg)
+    if (status /= 0) return
+    self%young = young; self%poisson = poisson; self%variation = lower_case(variation)
+    self%contrast = contrast; self%seed = seed
+  end subroutine material_settings_read
+
+  !> Write the group as the namelist '&material ... /' (strings quoted).
+  subroutine material_settings_write(self, lines, status, msg)
+    class(material_settings_t), intent(in) :: self
+    character(len=*), intent(out) :: lines(:)
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    real(dp) :: young, poisson, contrast
+    character(len=name_len) :: variation
+    integer(ip) :: seed
+    namelist /material/ young, poisson, variation, contrast, seed
+    young = self%young; poisson = self%poisson; variation = self%variation
+    contrast = self%contrast; seed = self%seed
+    lines = ''
+    write (lines, nml=material, delim='quote', iostat=status, iomsg=msg)
+  end subroutine material_settings_write
+
   !> Material of subdomain `id`.
-  subroutine subdomain_material(p, dec, id, young, poisson)
-    type(params_t), intent(in) :: p
+  subroutine subdomain_material(material, dec, id, young, poisson)
+    type(material_settings_t), intent(in) :: material
     type(decomposition_t), intent(in) :: dec
     integer(ip), intent(in) :: id
     real(dp), intent(out) :: young, poisson
     integer(ip) :: parity, r, ijk(3)
 
-    poisson = p%material%poisson
-    select case (trim(p%material%variation))
+    poisson = material%poisson
+    select case (trim(material%variation))
     case ('none')
-      young = p%material%young
+      young = material%young
     case ('checkerboard')
       if (dec%method == 'box') then
         r = id - 1
@@ -41,11 +119,11 @@ contains
       else
         parity = mod(id - 1, 2)
       end if
-      young = p%material%young*p%material%contrast**parity
+      young = material%young*material%contrast**parity
     case ('random')
-      young = p%material%young*p%material%contrast**hash_unit(id, 0_ip, p%material%seed)
+      young = material%young*material%contrast**hash_unit(id, 0_ip, material%seed)
     case default
-      call fatal_error('subdomain_material: unknown &material variation '//trim(p%material%variation))
+      call fatal_error('subdomain_material: unknown &material variation '//trim(material%variation))
     end select
   end subroutine subdomain_material
 end module materials

@@ -37,7 +37,6 @@ module b_operator
     procedure :: apply_concat
     procedure :: apply_b
     procedure :: apply_bt
-    procedure :: apply_abs_b
     procedure :: apply_g
     procedure :: apply_gt
     procedure :: n_entries
@@ -125,26 +124,22 @@ contains
     class(b_operator_t), intent(inout) :: this
     real(dp), intent(in) :: xall(:)
     real(dp), intent(inout) :: y(:)
-    call local_rows(this, xall, .false., this%wloc2)
+    call local_rows(this, xall, this%wloc2)
     call this%con%exchange%scatter_add(this%wloc2, y)
   end subroutine apply_concat
 
-  !> y_local = B xall (|B| xall with `absolute`) on the local rows, owned
+  !> y_local = B xall on the local rows, owned
   !> and ghosts, before the scatter-add.
-  subroutine local_rows(this, xall, absolute, y_local)
+  subroutine local_rows(this, xall, y_local)
     class(b_operator_t), intent(in) :: this
     real(dp), intent(in) :: xall(:)
-    logical, intent(in) :: absolute
     real(dp), intent(out) :: y_local(:)
     integer(ip) :: ls, e
-    real(dp) :: v
     y_local = 0
     do ls = 1, this%nlocal
       associate (bs => this%con%b(ls), o => this%offset(ls))
         do e = 1, bs%nentries
-          v = bs%val(e)
-          if (absolute) v = abs(v)
-          y_local(bs%row(e)) = y_local(bs%row(e)) + v*xall(o + bs%dof(e))
+          y_local(bs%row(e)) = y_local(bs%row(e)) + bs%val(e)*xall(o + bs%dof(e))
         end do
       end associate
     end do
@@ -174,20 +169,6 @@ contains
       u(ls)%v = this%xall(this%offset(ls) + 1:this%offset(ls + 1))
     end do
   end subroutine apply_bt
-
-  !> y = |B| |u|: the size of the terms of each row of B u (owned rows);
-  !> `absu` holds |u|.
-  subroutine apply_abs_b(this, absu, y)
-    class(b_operator_t), intent(inout) :: this
-    type(local_field_t), intent(in) :: absu(:)
-    real(dp), intent(inout) :: y(:)
-    integer(ip) :: ls
-    do ls = 1, this%nlocal
-      this%xall(this%offset(ls) + 1:this%offset(ls + 1)) = absu(ls)%v
-    end do
-    call local_rows(this, this%xall, .true., this%wloc2)
-    call this%con%exchange%scatter_add(this%wloc2, y)
-  end subroutine apply_abs_b
 
   !> z = G x (local coarse blocks) for a dual vector x.
   subroutine apply_g(this, x, z)

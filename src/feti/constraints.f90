@@ -361,7 +361,7 @@ contains
       w = 1
       if (p%solver%scaling /= 'young') return
       do c = 1, size(ids, kind=ip)
-        call subdomain_material(p, dec, ids(c), young, nu)
+        call subdomain_material(p%material, dec, ids(c), young, nu)
         w(c) = young/p%material%young
       end do
     end subroutine copy_weights

@@ -9,7 +9,7 @@ submodule(feti_operators) feti_builder
   use kinds, only: MPI_INT_I8, MPI_INT_IP, MPI_REAL_DP
   use decomposition, only: build_decomposition
   use subdomain, only: build_subdomain
-  use clusters, only: is_hybrid, unit_params, build_cluster
+  use clusters, only: is_hybrid, unit_mesh, build_cluster
   use assembly, only: assemble_subdomain
   use coarse_problem, only: choose_coarse_ranks
   use mpi_f08, only: MPI_Comm_size
@@ -40,13 +40,13 @@ contains
     call check_coarse_ranks()
 
     call timer_start('mesh')
-    this%hybrid = is_hybrid(p)
+    this%hybrid = is_hybrid(p%mesh)
     if (this%hybrid) then
       ! hybrid TFETI: the units are the clusters (src/mesh/clusters.f90)
-      call build_decomposition(p, comm, this%sub_dec)
-      call build_decomposition(unit_params(p), comm, this%dec)
+      call build_decomposition(p%mesh, comm, this%sub_dec)
+      call build_decomposition(unit_mesh(p%mesh), comm, this%dec)
     else
-      call build_decomposition(p, comm, this%dec)
+      call build_decomposition(p%mesh, comm, this%dec)
     end if
     this%n_local_subs = size(this%dec%local_subdomains, kind=ip)
     allocate (this%subs(this%n_local_subs))
@@ -70,7 +70,7 @@ contains
 
     call timer_start('assembly')
     do ls = 1, this%n_local_subs
-      call assemble_subdomain(p, this%dec, this%subs(ls))
+      call assemble_subdomain(p%material, p%load, this%dec, this%subs(ls))
     end do
     call timer_stop('assembly')
     call memory_mark('assembly')
@@ -212,8 +212,7 @@ contains
   !> (`share_subdomains`), the explicit action is one dgemm per class
   !> (compute bound) against the implicit one's streaming of the factors
   !> (memory bound): explicit when its flops per action are at most
-  !> `shared_flops_per_byte` times the implicit bytes (docs/RESULTS.md
-  !> "Shared local operators (issue 16)"). Otherwise (per-subdomain operators:
+  !> `shared_flops_per_byte` times the implicit bytes. Otherwise (per-subdomain operators:
   !> distorted meshes, METIS subdomains) the build is deferred, rent or buy:
   !> F starts implicit and the explicit operators are built once the run has
   !> made about as many F actions as pay the build back, N = ratio actions,
@@ -223,17 +222,11 @@ contains
   !> build; one that goes on pays it once the implicit actions have cost
   !> about as much, so it spends at most about twice what the better of the
   !> two up-front choices would have (feti_t%apply_f makes the switch).
-  !> Measured (docs/RESULTS.md "Deferred explicit F"): the break-even counts
-  !> were 0.27-2.5 times the ratio (median 1) on 11 distorted and METIS
-  !> cubes, 45-170 actions, where today's solver makes 20-100; the up-front
-  !> rule before it (explicit when ratio <= 150, "paid back after about 100
-  !> actions" for the solver of issue 16, 110-140 Hessian products) built
-  !> the operators for runs of 25-60 actions.
   subroutine choose_f_action(this, p)
     class(feti_t), intent(inout) :: this
     type(params_t), intent(in) :: p
     !> F actions before the deferred explicit build per unit of the ratio
-    !> build flops / bytes saved per action (docs/RESULTS.md "Deferred explicit F")
+    !> build flops / bytes saved per action (the break-even count is about the ratio)
     real(dp), parameter :: deferred_actions_per_ratio = 1
     real(dp), parameter :: shared_flops_per_byte = 8
     integer(i8) :: mine(3), all(3)
@@ -308,20 +301,15 @@ contains
   !> with k, Golub and Van Loan, "Matrix Computations", 4th ed., Sec. 10.1),
   !> found by ritz_values::tridiagonal_extremes. It stops when theta changes by
   !> less than lanczos_change (1e-2) relative or after `max_iterations` steps
-  !> (each one F action and one coarse solve). 1e-2 since session 11 (1e-3
-  !> before): on the 18 hard inputs, the weak family and random E it takes 4-11
-  !> steps instead of 7-20, the estimate stays within 3.2% of the 1e-3 one and
-  !> no Hessian count changes (docs/RESULTS.md "Lanczos stop (issue 14,
-  !> session 11)"); MPRGP raises its ||A|| to any larger Rayleigh quotient of
-  !> its search directions (mprgp). The Krylov space of k steps contains the k-th power
+  !> (each one F action and one coarse solve); a low estimate is safe because
+  !> MPRGP raises its ||A|| to any larger Rayleigh quotient of its search
+  !> directions (mprgp). The Krylov space of k steps contains the k-th power
   !> method iterate, and theta >= its Rayleigh quotient, so Lanczos reaches a
-  !> given accuracy in fewer steps than the power method (used before, with the
-  !> same stopping rule: 28 steps on cube_h8_n64, docs/RESULTS.md "Speed
-  !> (issue 16)"). Plain three-term recurrence (no stored basis): loss of
+  !> given accuracy in fewer steps than the power method. Plain three-term recurrence (no stored basis): loss of
   !> orthogonality only repeats converged Ritz values, it does not move them
   !> above lambda_max. The estimate scales the dual problem and sets the MPRGP
   !> step 1.9/||A||, which tolerates an underestimate of 5%.
-  !> Deferred (issue 14, session 14): set-up makes `steps` (lanczos_setup_steps)
+  !> Deferred: set-up makes `steps` (lanczos_setup_steps)
   !> of them, whose theta (a lower bound) scales the dual problem; the process
   !> is kept and continued to the stopping rule by refine_norm_pfp when MPRGP
   !> first needs its step length (dual_problem%refined_norm).

@@ -91,7 +91,6 @@ module feti_operators
     procedure :: primal
     procedure :: apply_bt
     procedure :: apply_b
-    procedure :: apply_abs_b
     procedure :: local_solve
     procedure :: bytes_per_f_action
     procedure :: flops_per_f_action
@@ -270,14 +269,6 @@ contains
     real(dp), intent(inout) :: y(:)
     call this%b%apply_b(u, y)
   end subroutine apply_b
-
-  !> y = |B| |u| (owned rows); `absu` holds |u|.
-  subroutine apply_abs_b(this, absu, y)
-    class(feti_t), intent(inout) :: this
-    type(local_field_t), intent(in) :: absu(:)
-    real(dp), intent(inout) :: y(:)
-    call this%b%apply_abs_b(absu, y)
-  end subroutine apply_abs_b
 
   !> x <- K^+ x for the concatenated vector of all local subdomains.
   subroutine local_solve(this, x)

@@ -11,6 +11,10 @@ module params
   use kinds, only: dp, ip, i8, path_len, name_len
   use errors, only: collective_error, exit_input_error, fatal_error
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast, MPI_BYTE, MPI_INTEGER, MPI_CHARACTER
+  use smalbe, only: smalbe_settings_t
+  use mesh_settings, only: mesh_settings_t
+  use materials, only: material_settings_t
+  use assembly, only: load_settings_t
   implicit none
   private
 
@@ -23,39 +27,6 @@ module params
   integer(i8), parameter, public :: dense_max_dofs = 500
 
   integer, parameter :: msg_len = 1024
-
-  type, public :: mesh_params_t
-    integer(ip) :: nsub(3) = [2, 2, 2]        !< subdomains per direction
-    integer(ip) :: nel(3) = [4, 4, 4]         !< elements per subdomain per direction
-    real(dp) :: lengths(3) = [1, 1, 1]        !< box size Lx, Ly, Lz [mm]
-    real(dp) :: distortion = 0                !< inner node offset, fraction of h
-    integer(ip) :: distortion_seed = 1        !< seed of the node offsets
-    character(len=name_len) :: decomposition = 'box'  !< 'box' | 'metis'
-    character(len=name_len) :: mapping = 'block'      !< subdomains to ranks: 'block' | 'metis'
-    !> hybrid TFETI: subdomains per cluster per direction (1,1,1: plain TFETI;
-    !> 0,0,0: chosen by `auto_cluster` when `read_params` reads the input; a
-    !> params_t made in code and never resolved keeps 0,0,0 = plain TFETI)
-    integer(ip) :: cluster(3) = [0, 0, 0]
-    !> decomposition = 'metis': elements per block edge of the block grid METIS
-    !> partitions (0: automatic, see src/mesh/decomposition.f90)
-    integer(ip) :: metis_block = 0
-    !> not namelist variables: set by `resolve_cluster` (read_params) when
-    !> `cluster` was 0,0,0: then `cluster` holds the choice, and the reason
-    logical :: cluster_auto = .false.
-    character(len=160) :: cluster_choice = ''
-  end type mesh_params_t
-
-  type, public :: material_params_t
-    real(dp) :: young = 2.1e5_dp              !< Young's modulus [MPa]
-    real(dp) :: poisson = 0.3_dp              !< Poisson's ratio
-    character(len=name_len) :: variation = 'none'  !< 'none' | 'checkerboard' | 'random'
-    real(dp) :: contrast = 1                  !< ratio of largest to smallest young
-    integer(ip) :: seed = 1                   !< seed of 'random'
-  end type material_params_t
-
-  type, public :: load_params_t
-    real(dp) :: top_pressure = 0              !< pressure on z = Lz, positive pushes down [MPa]
-  end type load_params_t
 
   type, public :: boundary_params_t
     logical :: top_dirichlet = .true.         !< prescribe u on z = Lz
@@ -70,44 +41,12 @@ module params
     real(dp) :: gap = 0                       !< initial gap below z = 0 [mm]
   end type obstacle_params_t
 
+  !> &solver: the QP solver's settings are owned by it (smalbe_settings_t with
+  !> its MPRGP and polish settings: defaults, checks, namelist variables); the
+  !> other variables belong to the dual problem and the FETI operators.
   type, public :: solver_params_t
-    real(dp) :: tol = 1.0e-6_dp               !< relative tolerance of SMALBE
-    integer(ip) :: max_outer = 200            !< SMALBE outer iterations
-    integer(ip) :: max_hessian = 20000        !< Hessian multiplications in total
-    real(dp) :: gamma = 1                     !< MPRGP proportioning parameter
-    real(dp) :: alpha_scale = 1.9_dp          !< expansion step alpha_bar = alpha_scale/||A||
-    character(len=name_len) :: expansion = 'fixed'  !< 'fixed' | 'optimal'
+    type(smalbe_settings_t) :: smalbe         !< SMALBE, its inner MPRGP and the polish
     real(dp) :: rho_scale = 1                 !< penalty rho = rho_scale ||P F P||
-    real(dp) :: m_scale = 100                 !< initial M = m_scale ||A||
-    real(dp) :: beta = 0.5_dp                 !< M <- beta M when the SMALBE test fails
-    real(dp) :: eta_scale = 0.1_dp            !< inner precision eta = eta_scale ||b||
-    !> M after an inner solve that made no step: 'cut' | 'temporary' | 'keep'
-    character(len=name_len) :: m_no_step = 'cut'
-    !> adaptive rho (docs/RESULTS.md "Outer loop with the preconditioner"): by
-    !> default rho is raised only once the outer loop stalls (contraction of
-    !> ||C x|| worse than rho_stall per outer iteration over rho_window of them),
-    !> then per iteration while ||C x|| shrinks by less than rho_contraction
-    real(dp) :: rho_growth = 2                !< adaptive rho: factor (1: rho constant)
-    real(dp) :: rho_contraction = 0.5_dp      !< raise rho when ||C x|| shrinks by less than this per outer
-    !> outer iterations over which that contraction is measured (geometric mean), and between two raises
-    integer(ip) :: rho_window = 10
-    !> > 0: the first raise only on a stall (contraction worse than this over rho_window), later ones per iteration
-    real(dp) :: rho_stall = 0.95_dp
-    !> > 0: SMALBE's polish (exact face solve) once the active set has not
-    !> changed for this many outer iterations; 0: off (docs/INPUT.md; 1 by
-    !> docs/RESULTS.md "Polish: the exact face solve")
-    integer(ip) :: polish_window = 1
-    !> the polish's active set rounds (docs/INPUT.md; defaults by docs/RESULTS.md "Active set
-    !> identification (issue 14)")
-    integer(ip) :: polish_rounds = 8          !< face solves per polish at most
-    logical :: polish_release = .true.        !< release wrong-sign active rows within the polish
-    real(dp) :: polish_settle = 0.15_dp       !< settled: the active set changed on <= this fraction of contact rows
-    real(dp) :: polish_loose = 0.5_dp         !< > 0: face solves check the set at every drop of their residual by this factor
-    integer(ip) :: polish_predict = 100       !< > 0: predictive set update from this many projected rows (issue 14, session 9)
-    !> the first release of a polish frees the wrong-sign rows of at least this share of the largest
-    !> wrong-sign gradient (issue 14, session 16; docs/INPUT.md)
-    real(dp) :: polish_release_share = 0.5_dp
-    logical :: polish_first = .true.          !< polish before the first outer iteration from every contact row at its bound
     integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
     character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
     character(len=name_len) :: local_ordering = 'auto'  !< 'auto' | 'metis' | 'amd' (local_ordering_for)
@@ -136,7 +75,6 @@ module params
     !> ('lumped' until the face condition estimate exceeds preconditioner_switch, then 'dirichlet')
     character(len=name_len) :: preconditioner = 'auto'
     real(dp) :: preconditioner_switch = 100   !< 'auto': the face condition estimate that switches
-    logical :: monitor = .true.               !< one line per outer iteration
   end type solver_params_t
 
   type, public :: reconstruction_params_t
@@ -165,9 +103,9 @@ module params
   !> All parameters of a run.
   type, public :: params_t
     character(len=path_len) :: file = ''
-    type(mesh_params_t) :: mesh
-    type(material_params_t) :: material
-    type(load_params_t) :: load
+    type(mesh_settings_t) :: mesh
+    type(material_settings_t) :: material
+    type(load_settings_t) :: load
     type(boundary_params_t) :: boundary
     type(obstacle_params_t) :: obstacle
     type(solver_params_t) :: solver
@@ -517,31 +455,23 @@ contains
     character(len=*), intent(out) :: msg
     character(len=*), intent(in), optional :: group_text
     character(len=*), intent(out), optional :: written(:)
+    character(len=:), allocatable :: rest, tail(:)
+    integer :: k, i
     logical :: reading
-    integer(ip) :: nsub(3), nel(3), cluster(3), metis_block, distortion_seed, seed, max_outer, max_hessian, power_iterations, &
-                   coarse_ranks, &
-                   rho_window, polish_window, polish_rounds, polish_predict
-    real(dp) :: lengths(3), distortion, young, poisson, contrast, top_pressure, top_displacement(3), &
-                radius, gap, tol, gamma, alpha_scale, rho_scale, m_scale, beta, eta_scale, rho_growth, &
-                rho_contraction, rho_stall, coarse_blr, polish_settle, polish_loose, polish_release_share, &
-                regularization, active_tol, kkt_tol, preconditioner_switch
-    character(len=name_len) :: decomposition, mapping, variation, shape, expansion, coarse, &
+    integer(ip) :: power_iterations, coarse_ranks
+    real(dp) :: top_displacement(3), &
+                radius, gap, rho_scale, coarse_blr, regularization, active_tol, kkt_tol, preconditioner_switch
+    character(len=name_len) :: shape, coarse, &
                                local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
-                               m_no_step, f_action, f_storage, share_subdomains, preconditioner, coarse_factor
+                               f_action, f_storage, share_subdomains, preconditioner, coarse_factor
     character(len=path_len) :: directory
-    logical :: top_dirichlet, symmetry_x0, symmetry_y0, monitor, write_hdf5, write_report, coarse_ooc, polish_release, &
-               polish_first
-    namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping, cluster, metis_block
-    namelist /material/ young, poisson, variation, contrast, seed
-    namelist /load/ top_pressure
+    logical :: top_dirichlet, symmetry_x0, symmetry_y0, write_hdf5, write_report, coarse_ooc
     namelist /boundary/ top_dirichlet, top_displacement, symmetry_x0, symmetry_y0
     namelist /obstacle/ shape, radius, gap
-    namelist /solver/ tol, max_outer, max_hessian, gamma, alpha_scale, expansion, rho_scale, &
-      m_scale, beta, eta_scale, m_no_step, rho_growth, rho_contraction, rho_window, rho_stall, polish_window, &
-      polish_rounds, polish_release, polish_settle, polish_loose, polish_predict, polish_release_share, polish_first, &
-      power_iterations, coarse, coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, coarse_factor, local_ordering, &
-      local_solver, f_action, f_storage, share_subdomains, &
-      regularization, scaling, stopping, preconditioner, preconditioner_switch, monitor
+    ! &solver: the variables that are not the QP solver's (solver_group hands those to it)
+    namelist /solver/ rho_scale, power_iterations, coarse, coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, &
+      coarse_factor, local_ordering, local_solver, f_action, f_storage, share_subdomains, &
+      regularization, scaling, stopping, preconditioner, preconditioner_switch
     namelist /reconstruction/ method, active_tol, kkt_tol
     character(len=name_len) :: run_name
     namelist /output/ directory, run_name, write_hdf5, write_report
@@ -552,21 +482,18 @@ contains
     if (present(written)) written = ''
     select case (name)
     case ('mesh')
-      nsub = p%mesh%nsub; nel = p%mesh%nel; lengths = p%mesh%lengths
-      distortion = p%mesh%distortion; distortion_seed = p%mesh%distortion_seed
-      decomposition = p%mesh%decomposition; mapping = p%mesh%mapping; cluster = p%mesh%cluster
-      metis_block = p%mesh%metis_block
-      if (reading) read (group_text, nml=mesh, iostat=status, iomsg=msg)
-      if (.not. reading) write (written, nml=mesh, delim='quote', iostat=status, iomsg=msg)
+      ! the group's owner reads and writes it
+      if (reading) call p%mesh%read_namelist(group_text, status, msg)
+      if (.not. reading) call p%mesh%write_namelist(written, status, msg)
+      return
     case ('material')
-      young = p%material%young; poisson = p%material%poisson
-      variation = p%material%variation; contrast = p%material%contrast; seed = p%material%seed
-      if (reading) read (group_text, nml=material, iostat=status, iomsg=msg)
-      if (.not. reading) write (written, nml=material, delim='quote', iostat=status, iomsg=msg)
+      if (reading) call p%material%read_namelist(group_text, status, msg)
+      if (.not. reading) call p%material%write_namelist(written, status, msg)
+      return
     case ('load')
-      top_pressure = p%load%top_pressure
-      if (reading) read (group_text, nml=load, iostat=status, iomsg=msg)
-      if (.not. reading) write (written, nml=load, delim='quote', iostat=status, iomsg=msg)
+      if (reading) call p%load%read_namelist(group_text, status, msg)
+      if (.not. reading) call p%load%write_namelist(written, status, msg)
+      return
     case ('boundary')
       top_dirichlet = p%boundary%top_dirichlet; top_displacement = p%boundary%top_displacement
       symmetry_x0 = p%boundary%symmetry_x0; symmetry_y0 = p%boundary%symmetry_y0
@@ -578,25 +505,31 @@ contains
       if (.not. reading) write (written, nml=obstacle, delim='quote', iostat=status, iomsg=msg)
     case ('solver')
       associate (s => p%solver)
-        tol = s%tol; max_outer = s%max_outer; max_hessian = s%max_hessian; gamma = s%gamma
-        alpha_scale = s%alpha_scale; expansion = s%expansion; rho_scale = s%rho_scale
-        m_scale = s%m_scale; beta = s%beta; eta_scale = s%eta_scale; m_no_step = s%m_no_step
-        rho_growth = s%rho_growth; rho_contraction = s%rho_contraction; rho_window = s%rho_window
-        rho_stall = s%rho_stall; polish_window = s%polish_window
-        polish_rounds = s%polish_rounds; polish_release = s%polish_release
-        polish_settle = s%polish_settle; polish_loose = s%polish_loose; polish_predict = s%polish_predict
-        polish_release_share = s%polish_release_share
-        polish_first = s%polish_first
+        rho_scale = s%rho_scale
         power_iterations = s%power_iterations; coarse = s%coarse
         local_ordering = s%local_ordering; local_solver = s%local_solver
         f_action = s%f_action; f_storage = s%f_storage; share_subdomains = s%share_subdomains
         coarse_placement = s%coarse_placement; coarse_ranks = s%coarse_ranks
         coarse_blr = s%coarse_blr; coarse_ooc = s%coarse_ooc; coarse_factor = s%coarse_factor
-        regularization = s%regularization; scaling = s%scaling; stopping = s%stopping; monitor = s%monitor
+        regularization = s%regularization; scaling = s%scaling; stopping = s%stopping
         preconditioner = s%preconditioner; preconditioner_switch = s%preconditioner_switch
       end associate
-      if (reading) read (group_text, nml=solver, iostat=status, iomsg=msg)
-      if (.not. reading) write (written, nml=solver, delim='quote', iostat=status, iomsg=msg)
+      if (reading) then
+        call solver_group(p%solver%smalbe, group_text, status, msg, rest)
+        if (status /= 0) return
+        read (rest, nml=solver, iostat=status, iomsg=msg)
+      else
+        call solver_group(p%solver%smalbe, status=status, msg=msg, written=written)
+        if (status /= 0) return
+        k = count(written /= '')
+        allocate (character(len=len(written)) :: tail(size(written) - k))
+        write (tail, nml=solver, delim='quote', iostat=status, iomsg=msg)
+        do i = 1, size(tail)
+          if (tail(i)(1:1) == '&' .or. k >= size(written)) cycle
+          k = k + 1
+          written(k) = tail(i)
+        end do
+      end if
     case ('reconstruction')
       method = p%reconstruction%method; active_tol = p%reconstruction%active_tol
       kkt_tol = p%reconstruction%kkt_tol
@@ -610,28 +543,17 @@ contains
     end select
     if (.not. reading) return
     select case (name)
-    case ('mesh')
-      p%mesh = mesh_params_t(nsub, nel, lengths, distortion, distortion_seed, &
-                             lower(decomposition), lower(mapping), cluster, metis_block)
-    case ('material')
-      p%material = material_params_t(young, poisson, lower(variation), contrast, seed)
-    case ('load')
-      p%load = load_params_t(top_pressure)
     case ('boundary')
       p%boundary = boundary_params_t(top_dirichlet, top_displacement, symmetry_x0, symmetry_y0)
     case ('obstacle')
       p%obstacle = obstacle_params_t(lower(shape), radius, gap)
     case ('solver')
-      p%solver = solver_params_t(tol, max_outer, max_hessian, gamma, alpha_scale, lower(expansion), &
-                                 rho_scale, m_scale, beta, eta_scale, lower(m_no_step), rho_growth, &
-                                 rho_contraction, rho_window, rho_stall, polish_window, &
-                                 polish_rounds, polish_release, polish_settle, polish_loose, polish_predict, &
-                                 polish_release_share, polish_first, power_iterations, lower(coarse), &
+      p%solver = solver_params_t(p%solver%smalbe, rho_scale, power_iterations, lower(coarse), &
                                  lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
                                  lower(share_subdomains), &
                                  lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, lower(coarse_factor), &
                                  regularization, lower(scaling), lower(stopping), lower(preconditioner), &
-                                 preconditioner_switch, monitor)
+                                 preconditioner_switch)
     case ('reconstruction')
       p%reconstruction = reconstruction_params_t(lower(method), active_tol, kkt_tol)
     case ('output')
@@ -639,37 +561,126 @@ contains
     end select
   end subroutine group_namelist
 
+  !> The dispatcher of &solver: each assignment of `group_text` goes to the
+  !> component that owns the variable (SMALBE, its inner MPRGP, the polish:
+  !> each reads its own variables with its own namelist); `rest` is the group
+  !> with the other assignments (read by group_namelist). Without
+  !> `group_text`: the components write their variables into `written`
+  !> (from its first line '&SOLVER', without the closing '/').
+  subroutine solver_group(settings, group_text, status, msg, rest, written)
+    type(smalbe_settings_t), intent(inout) :: settings
+    character(len=*), intent(in), optional :: group_text
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    character(len=:), allocatable, intent(out), optional :: rest
+    character(len=*), intent(out), optional :: written(:)
+    integer, parameter :: n_parts = 3
+    character(len=:), allocatable :: body, piece, name, part(:)
+    character(len=path_len + 64) :: lines(64)
+    type(param_item_t), allocatable :: items(:)
+    integer, allocatable :: starts(:)
+    integer :: c, k, i, nstarts, body_start, line
+    logical :: owned
+
+    status = 0
+    msg = ''
+    if (.not. present(group_text)) then
+      written = ''
+      written(1) = '&SOLVER'
+      line = 1
+      do c = 1, n_parts
+        call write_part(c, lines)
+        if (status /= 0) return
+        do k = 1, size(lines)
+          if (len_trim(lines(k)) == 0) cycle
+          if (adjustl(lines(k)) == '/' .or. lines(k)(1:1) == '&') cycle
+          line = line + 1
+          written(line) = lines(k)
+        end do
+      end do
+      return
+    end if
+    allocate (character(len=len(group_text)) :: part(n_parts))
+    part = ''
+    rest = ''
+    body_start = index(group_text, ' ')
+    if (body_start == 0) body_start = len(group_text)
+    body = group_text(body_start:len(group_text) - 1)
+    call assignment_starts(body, starts, nstarts)
+    do k = 1, nstarts
+      if (k < nstarts) then
+        piece = body(starts(k):starts(k + 1) - 1)
+      else
+        piece = body(starts(k):)
+      end if
+      i = index(piece, '=')
+      owned = .false.
+      if (i > 0) then
+        name = lower(trim(adjustl(piece(1:i - 1))))
+        do c = 1, n_parts
+          call write_part(c, lines)
+          if (status /= 0) return
+          call parse_namelist(join(lines), items)
+          if (any(items%name == name)) then
+            part(c) = trim(part(c))//' '//piece
+            owned = .true.
+            exit
+          end if
+        end do
+      end if
+      if (.not. owned) rest = rest//' '//piece
+    end do
+    ! every component reads (an empty group leaves its values as they are)
+    do c = 1, n_parts
+      select case (c)
+      case (1)
+        call settings%read_namelist('&solver '//trim(part(c))//' /', status, msg)
+      case (2)
+        call settings%inner%read_namelist('&solver '//trim(part(c))//' /', status, msg)
+      case (3)
+        call settings%polish%read_namelist('&solver '//trim(part(c))//' /', status, msg)
+      end select
+      if (status /= 0) return
+    end do
+    rest = '&solver '//rest//' /'
+  contains
+    subroutine write_part(c, out)
+      integer, intent(in) :: c
+      character(len=*), intent(out) :: out(:)
+      select case (c)
+      case (1)
+        call settings%write_namelist(out, status, msg)
+      case (2)
+        call settings%inner%write_namelist(out, status, msg)
+      case (3)
+        call settings%polish%write_namelist(out, status, msg)
+      end select
+    end subroutine write_part
+    function join(out) result(text)
+      character(len=*), intent(in) :: out(:)
+      character(len=:), allocatable :: text
+      integer :: j
+      text = ''
+      do j = 2, size(out)
+        text = text//' '//trim(out(j))
+      end do
+    end function join
+  end subroutine solver_group
+
   !> Check every value; the first violation gives `status` /= 0 and a message
   !> naming the group, the variable and the allowed values.
   subroutine check_params(p, status, msg)
     type(params_t), intent(in) :: p
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
+    character(len=:), allocatable :: variable, rule, got
 
     status = 0
     msg = ''
     associate (m => p%mesh)
-      if (any(m%nsub < 1)) call fail('mesh', 'nsub', 'each entry must be >= 1', ints(m%nsub))
-      if (any(m%nel < 1)) call fail('mesh', 'nel', 'each entry must be >= 1', ints(m%nel))
-      if (any(m%lengths <= 0)) call fail('mesh', 'lengths', 'each entry must be > 0', reals(m%lengths))
-      if (m%distortion < 0 .or. m%distortion >= 0.5_dp) &
-        call fail('mesh', 'distortion', 'must be in [0, 0.5)', reals([m%distortion]))
-      if (.not. one_of(m%decomposition, [character(len=8) :: 'box', 'metis'])) &
-        call fail('mesh', 'decomposition', "must be 'box' or 'metis'", m%decomposition)
-      if (.not. one_of(m%mapping, [character(len=8) :: 'block', 'metis'])) &
-        call fail('mesh', 'mapping', "must be 'block' or 'metis'", m%mapping)
-      if (.not. (all(m%cluster == 0) .or. all(m%cluster >= 1))) call fail('mesh', 'cluster', &
-        'each entry must be >= 1, or all three 0 (automatic choice)', ints(m%cluster))
-      if (m%metis_block < 0) call fail('mesh', 'metis_block', &
-        'must be 0 (automatic) or a block edge b >= 1 in elements', ints([m%metis_block]))
-      if (status == 0 .and. all(m%cluster >= 1)) then     ! (no short-circuit in Fortran: mod only with cluster >= 1)
-        if (any(mod(m%nsub, m%cluster) /= 0)) &
-          call fail('mesh', 'cluster', 'must divide nsub in every direction (nsub = '//ints(m%nsub)//')', &
-                    ints(m%cluster))
-      end if
+      call m%check(variable, rule, got)
+      if (len(variable) > 0) call fail('mesh', variable, rule, got)
       if (any(m%cluster > 1)) then
-        if (m%decomposition /= 'box') call fail('mesh', 'cluster', &
-          "> 1 (hybrid TFETI) needs decomposition = 'box'", ints(m%cluster))
         if (p%material%variation /= 'none') call fail('mesh', 'cluster', &
           "> 1 (hybrid TFETI) needs &material variation = 'none'", ints(m%cluster))
         if (p%solver%preconditioner == 'dirichlet') call fail('mesh', 'cluster', &
@@ -682,19 +693,9 @@ contains
           "> 1 (hybrid TFETI) works with &solver local_solver = 'auto', 'block' or 'subdomain', not 'dense'", &
           ints(m%cluster))
       end if
-      if (status == 0 .and. product(int(m%nsub, 8)) * product(int(m%nel, 8)) > 2**27) &
-        call fail('mesh', 'nsub, nel', 'give at most 2**27 elements in all', &
-                  ints(m%nsub)//' x '//ints(m%nel))
     end associate
-    associate (m => p%material)
-      if (m%young <= 0) call fail('material', 'young', 'must be > 0', reals([m%young]))
-      if (m%poisson <= -1 .or. m%poisson >= 0.5_dp) &
-        call fail('material', 'poisson', 'must be in (-1, 0.5)', reals([m%poisson]))
-      if (.not. one_of(m%variation, [character(len=12) :: 'none', 'checkerboard', 'random'])) &
-        call fail('material', 'variation', "must be 'none', 'checkerboard' or 'random'", m%variation)
-      if (m%contrast < 1 .or. m%contrast > 1.0e12_dp) &
-        call fail('material', 'contrast', 'must be in [1, 1e12]', reals([m%contrast]))
-    end associate
+    call p%material%check(variable, rule, got)
+    if (len(variable) > 0) call fail('material', variable, rule, got)
     associate (b => p%boundary)
       ! frictionless contact holds u_z only: without the top face, the symmetry planes must hold
       ! the x and y translations and the rotation about z, and an obstacle the z translation
@@ -710,39 +711,9 @@ contains
       if (o%radius <= 0) call fail('obstacle', 'radius', 'must be > 0', reals([o%radius]))
     end associate
     associate (s => p%solver)
-      if (s%tol <= 0 .or. s%tol >= 1) call fail('solver', 'tol', 'must be in (0, 1)', reals([s%tol]))
-      if (s%max_outer < 1) call fail('solver', 'max_outer', 'must be >= 1', ints([s%max_outer]))
-      if (s%max_hessian < 1) call fail('solver', 'max_hessian', 'must be >= 1', ints([s%max_hessian]))
-      if (s%gamma <= 0) call fail('solver', 'gamma', 'must be > 0', reals([s%gamma]))
-      if (s%alpha_scale <= 0 .or. s%alpha_scale > 2) &
-        call fail('solver', 'alpha_scale', 'must be in (0, 2]', reals([s%alpha_scale]))
-      if (.not. one_of(s%expansion, [character(len=8) :: 'fixed', 'optimal'])) &
-        call fail('solver', 'expansion', "must be 'fixed' or 'optimal'", s%expansion)
+      call s%smalbe%check(variable, rule, got)
+      if (len(variable) > 0) call fail('solver', variable, rule, got)
       if (s%rho_scale <= 0) call fail('solver', 'rho_scale', 'must be > 0', reals([s%rho_scale]))
-      if (s%m_scale <= 0) call fail('solver', 'm_scale', 'must be > 0', reals([s%m_scale]))
-      if (s%beta <= 0 .or. s%beta >= 1) call fail('solver', 'beta', 'must be in (0, 1)', reals([s%beta]))
-      if (s%eta_scale <= 0) call fail('solver', 'eta_scale', 'must be > 0', reals([s%eta_scale]))
-      if (.not. one_of(s%m_no_step, [character(len=9) :: 'cut', 'temporary', 'keep'])) &
-        call fail('solver', 'm_no_step', "must be 'cut', 'temporary' or 'keep'", s%m_no_step)
-      if (.not. s%rho_growth >= 1) call fail('solver', 'rho_growth', 'must be >= 1', reals([s%rho_growth]))
-      if (.not. (s%rho_contraction > 0 .and. s%rho_contraction < 1)) &
-        call fail('solver', 'rho_contraction', 'must be in (0, 1)', reals([s%rho_contraction]))
-      if (s%rho_window < 1) call fail('solver', 'rho_window', 'must be >= 1', ints([s%rho_window]))
-      if (.not. (s%rho_stall >= 0 .and. s%rho_stall < 1)) &
-        call fail('solver', 'rho_stall', 'must be in [0, 1) (0: off)', reals([s%rho_stall]))
-      if (s%polish_window < 0) &
-        call fail('solver', 'polish_window', 'must be >= 0 (0: off)', ints([s%polish_window]))
-      if (s%polish_rounds < 1) &
-        call fail('solver', 'polish_rounds', 'must be >= 1', ints([s%polish_rounds]))
-      if (.not. (s%polish_settle >= 0 .and. s%polish_settle < 1)) &
-        call fail('solver', 'polish_settle', 'must be in [0, 1) (0: no change)', reals([s%polish_settle]))
-      if (.not. (s%polish_loose >= 0 .and. s%polish_loose < 1)) &
-        call fail('solver', 'polish_loose', 'must be in [0, 1) (0: off)', reals([s%polish_loose]))
-      if (s%polish_predict < 0) &
-        call fail('solver', 'polish_predict', 'must be >= 0 (0: off)', ints([s%polish_predict]))
-      if (.not. (s%polish_release_share >= 0 .and. s%polish_release_share < 1)) &
-        call fail('solver', 'polish_release_share', 'must be in [0, 1) (0: release every wrong-sign row at once)', &
-                  reals([s%polish_release_share]))
       if (s%power_iterations < 1) &
         call fail('solver', 'power_iterations', 'must be >= 1', ints([s%power_iterations]))
       if (.not. one_of(s%coarse, [character(len=8) :: 'mumps', 'cholesky'])) &
@@ -812,12 +783,8 @@ contains
   !> The ordering of the subdomain factorizations that `&solver local_ordering`
   !> asks for, when the largest subdomain (or cluster) of the run has
   !> `max_ndof` dofs: 'amd' and 'metis' as given; 'auto' (the default) is
-  !> MUMPS's AMD up to amd_max_dofs dofs and METIS nested dissection above.
-  !> Measured (docs/RESULTS.md "Local ordering: AMD on small subdomains (issue
-  !> 14, session 13)", distorted and METIS cubes of 64 subdomains, 2 ranks):
-  !> AMD 4-6% less total time at 4^3 and 6^3 elements per subdomain (375 and
-  !> 1029 dofs: no METIS call per subdomain, the same factor and solve times),
-  !> METIS 7% less at 8^3 (2187 dofs: its factors make the solves faster).
+  !> MUMPS's AMD up to amd_max_dofs dofs (no METIS call per subdomain) and
+  !> METIS nested dissection above (its factors make the solves faster).
   pure function local_ordering_for(requested, max_ndof) result(used)
     character(len=*), intent(in) :: requested
     integer(i8), intent(in) :: max_ndof
@@ -833,8 +800,7 @@ contains
   !> default) is the dense split K^+ (kplus_dense) up to dense_max_dofs dofs
   !> in plain TFETI, one MUMPS factorization per rank ('block') otherwise.
   !> Where the subdomains form classes of congruent ones (share_subdomains),
-  !> K^+ is shared per class whatever this says. Measured in docs/RESULTS.md
-  !> "Dense local solver (issue 14, session 14)".
+  !> K^+ is shared per class whatever this says.
   pure function local_solver_for(requested, max_ndof, hybrid) result(used)
     character(len=*), intent(in) :: requested
     integer(i8), intent(in) :: max_ndof
@@ -858,17 +824,15 @@ contains
     p%mesh%cluster_choice = reason
   end subroutine resolve_cluster
 
-  !> The automatic choice of hybrid TFETI clusters (docs/INPUT.md `cluster`,
-  !> measured in docs/RESULTS.md "Automatic clusters (issue 14, session 9)").
+  !> The automatic choice of hybrid TFETI clusters (docs/INPUT.md `cluster`).
   !> Clusters pay where the coarse problem dominates: subdomains of at most
   !> `auto_max_nel` = 2 elements per direction (H/h <= 2), at least
   !> 512 (H/h)^3 of them (H/h the largest entry of nel: 512 subdomains of one
-  !> element, 4096 of 2^3; measured to lose at 64 of one element and at 64
-  !> and 512 of 2^3, to break even at 1728 of 2^3). Then, per direction, the
+  !> element, 4096 of 2^3; fewer do not pay). Then, per direction, the
   !> largest divisor c of nsub with nel*c <= `auto_cluster_edge` = 4
   !> elements along the cluster's edge, reduced (largest entry first) until
   !> every rank holds at least `auto_clusters_per_rank` = 4 clusters (a
-  !> balance guard, not measured: a cluster lives on one rank). [1, 1, 1]
+  !> balance guard: a cluster lives on one rank). [1, 1, 1]
   !> (plain TFETI) whenever a requirement of hybrid TFETI fails (box
   !> decomposition, uniform material, no Dirichlet preconditioner, implicit
   !> F) or the rule does not fire; `reason` says which.

@@ -22,6 +22,7 @@ module json_writer
   use errors, only: fatal_error
   use file_system, only: rename_file
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank
+  use report_sink, only: report_sink_t
   implicit none
   private
 
@@ -30,7 +31,7 @@ module json_writer
   integer, parameter :: max_depth = 32
 
   !> JSON text under construction.
-  type, public :: json_writer_t
+  type, extends(report_sink_t), public :: json_writer_t
     private
     character(len=:), allocatable :: buffer
     integer :: length = 0                          !< characters used in buffer
@@ -55,6 +56,14 @@ module json_writer
     procedure :: text
     procedure :: write_file
     procedure :: reset
+    ! the report_sink_t interface (sections written by the solvers)
+    procedure :: put_long => add_long
+    procedure :: put_real => add_real
+    procedure :: put_logical => add_logical
+    procedure :: put_text => add_string
+    procedure :: put_null => add_null
+    procedure :: put_reals => add_reals
+    procedure :: put_longs => add_longs
   end type json_writer_t
 
 contains
@@ -345,6 +354,18 @@ contains
     end do
     call end_array(self)
   end subroutine add_reals
+
+  subroutine add_longs(self, key, values)
+    class(json_writer_t), intent(inout) :: self
+    character(len=*), intent(in) :: key
+    integer(i8), intent(in) :: values(:)
+    integer :: i
+    call begin_array(self, key)
+    do i = 1, size(values)
+      call append_long(self, values(i))
+    end do
+    call end_array(self)
+  end subroutine add_longs
 
   subroutine add_integers(self, key, values)
     class(json_writer_t), intent(inout) :: self

@@ -9,7 +9,6 @@ module run_report
   use params, only: params_t, param_item_t, param_items, default_params
   use feti_operators, only: feti_t, feti_sizes_t
   use coarse_problem, only: coarse_problem_t
-  use qp_problem, only: qp_status_name
   use smalbe, only: smalbe_t
   use tfeti_dualization, only: tfeti_dualization_t, dual_solution_t
   use contact_summary, only: contact_summary_t
@@ -64,23 +63,12 @@ contains
                           contact%active_nodes, n%gluing_rows, n%dirichlet_rows], i8))
     call js%end_object()
     call js%begin_object('solver')
-    call js%add('converged', solver%converged())
-    call js%add('status', qp_status_name(solver%status))
-    call js%add('message', trim(solver%message))
-    call js%add_each([character(len=24) :: 'outer_iterations', 'inner_iterations', 'hessian_multiplications', &
-                      'cg_steps', 'expansion_steps', 'proportioning_steps', 'm_updates'], &
-                     int([solver%n_outer, solver%n_inner, solver%n_hessian, solver%n_cg, solver%n_expansion, &
-                          solver%n_proportioning, solver%n_m_updates], i8))
-    call js%add_each([character(len=24) :: 'projected_gradient', 'equality_residual', 'norm_b', 'rho', 'norm_pfp'], &
-                     [solver%gp_norm, solver%cnorm, solver%norm_b, dual%rho(), op%norm_pfp()])
+    ! the solver's own section, then what the dual problem adds to it
+    call solver%report(js)
+    call js%add_each([character(len=8) :: 'rho', 'norm_pfp'], [dual%rho(), op%norm_pfp()])
     call js%add_each([character(len=16) :: 'f_applications', 'coarse_solves'], [op%f_applications(), op%coarse_solves()])
     call js%add('variant', solver_variant(p))
-    call add_outer_history(js, solver)
-    ! MPRGP in the face: the preconditioner and the condition estimate of the
-    ! operator its CG runs saw (Ritz values of the Lanczos matrices of the CG
-    ! coefficients; null when no run had 2 steps)
     call js%add('preconditioner', dual%preconditioner_name())
-    call js%add('preconditioner_applications', int(solver%n_preconditioner, i8))
     ! 'auto': the Hessian count at the switch to 'dirichlet' and the estimate that made it (null: none)
     call dual%preconditioner_switch(switch_at, switch_estimate)
     if (switch_at >= 0) then
@@ -90,33 +78,6 @@ contains
       call js%add_null('preconditioner_switch_at')
       call js%add_null('preconditioner_switch_estimate')
     end if
-    ! SMALBE's polish (exact face solve; its products are in hessian_multiplications)
-    call js%add_each([character(len=24) :: 'polish_window', 'polish_count', 'polish_hessian', 'polish_cg_steps', &
-                      'polish_accepted'], int([solver%polish_window, solver%n_polish, solver%n_polish_hessian, &
-                                               solver%n_polish_steps, solver%n_polish_exact], i8))
-    call js%add_each([character(len=24) :: 'polish_face_solves', 'polish_released', 'polish_predicted'], &
-                     int([solver%n_polish_rounds, solver%n_polish_released, solver%n_polish_predicted], i8))
-    ! polish_first: whether the solve started with a polish that was not given up
-    call js%add('polish_first_used', solver%polished_first)
-    associate (rz => solver%inner%ritz)
-      if (rz%n_runs > 0) then
-        call js%add_each([character(len=24) :: 'face_condition_estimate', 'face_ritz_min', 'face_ritz_max'], &
-                         [rz%max_ratio, rz%theta_min, rz%theta_max])
-      else
-        call js%add_null('face_condition_estimate')
-        call js%add_null('face_ritz_min')
-        call js%add_null('face_ritz_max')
-      end if
-      call js%add_each([character(len=16) :: 'cg_runs', 'longest_cg_run'], int([rz%n_runs, rz%longest], i8))
-    end associate
-    ! the same estimate from the polish's face CG runs (null: none of 2 steps)
-    associate (rz => solver%polish%ritz)
-      if (rz%n_runs > 0) then
-        call js%add('polish_condition_estimate', rz%max_ratio)
-      else
-        call js%add_null('polish_condition_estimate')
-      end if
-    end associate
     call js%end_object()
     call js%begin_object('kkt')
     call js%add_each([character(len=16) :: 'equilibrium', 'gluing', 'dirichlet', 'penetration', 'equality', &
@@ -246,62 +207,6 @@ contains
       v = mantissa//v(e:)
     end function short
   end function solver_variant
-
-  !> The SMALBE monitor's per-outer figures: ||C x_k|| (`cnorm_per_outer`), the
-  !> Hessian multiplications after outer iteration k (`hessian_per_outer`,
-  !> cumulative), the contraction ||C x_k|| / ||C x_(k-1)|| for k >= 2
-  !> (`contraction_per_outer`), its median and its geometric mean over the
-  !> second half of the outer iterations (`contraction_late`, the linear rate;
-  !> null with fewer than 2 outer iterations), and the Hessian multiplications
-  !> per outer iteration (`hessian_per_outer_mean`).
-  subroutine add_outer_history(js, solver)
-    type(json_writer_t), intent(inout) :: js
-    type(smalbe_t), intent(in) :: solver
-    real(dp), allocatable :: c(:), q(:), sorted(:)
-    integer(ip), allocatable :: h(:)
-    integer(ip) :: k, j, nq, first
-    real(dp) :: t
-    allocate (c(0), h(0))
-    if (allocated(solver%cnorm_history)) c = solver%cnorm_history
-    if (allocated(solver%hessian_history)) h = solver%hessian_history
-    nq = max(size(c, kind=ip) - 1, 0_ip)
-    allocate (q(nq))
-    do k = 1, nq
-      if (c(k) > 0) then
-        q(k) = c(k + 1)/c(k)
-      else
-        q(k) = 0
-      end if
-    end do
-    call js%add('cnorm_per_outer', c)
-    call js%add('hessian_per_outer', h)
-    if (allocated(solver%rho_history)) call js%add('rho_per_outer', solver%rho_history)
-    call js%add('contraction_per_outer', q)
-    if (nq > 0) then
-      sorted = q
-      do k = 2, nq                            ! insertion sort: at most max_outer values
-        t = sorted(k)
-        j = k - 1
-        do while (j >= 1)
-          if (sorted(j) <= t) exit
-          sorted(j + 1) = sorted(j)
-          j = j - 1
-        end do
-        sorted(j + 1) = t
-      end do
-      call js%add('contraction_median', 0.5_dp*(sorted((nq + 1)/2) + sorted(nq/2 + 1)))
-      first = nq/2 + 1
-      if (all(q(first:nq) > 0)) then
-        call js%add('contraction_late', exp(sum(log(q(first:nq)))/(nq - first + 1)))
-      else
-        call js%add('contraction_late', 0.0_dp)
-      end if
-    else
-      call js%add_null('contraction_median')
-      call js%add_null('contraction_late')
-    end if
-    call js%add('hessian_per_outer_mean', real(solver%n_hessian, dp)/max(solver%n_outer, 1_ip))
-  end subroutine add_outer_history
 
   !> Where the output is and how to look at it (a user's first question).
   subroutine log_where_to_look(p)

@@ -6,40 +6,40 @@
 !> rows as between clusters (docs/THEORY.md, "Hybrid TFETI").
 !>
 !> The clusters form a box decomposition themselves: nsub/cluster clusters
-!> per direction of nel*cluster elements each (`unit_params`), so the
+!> per direction of nel*cluster elements each (`unit_mesh`), so the
 !> cluster-level decomposition_t gives the cluster->rank map, the cluster
 !> graph and the clusters holding a node by index arithmetic. The
 !> subdomain-level decomposition_t gives the subdomain copies of a node.
 module clusters
   use kinds, only: dp, ip, i8
   use errors, only: fatal_error
-  use params, only: params_t
+  use mesh_settings, only: mesh_settings_t
   use decomposition, only: decomposition_t
   use subdomain, only: subdomain_t
   use sorting, only: sort_permutation
   implicit none
   private
 
-  public :: is_hybrid, unit_params, cluster_of_subdomain, is_corner, node_copies, build_cluster
+  public :: is_hybrid, unit_mesh, cluster_of_subdomain, is_corner, node_copies, build_cluster
 
 contains
 
   !> True when `&mesh cluster` groups more than one subdomain per cluster.
-  pure logical function is_hybrid(p)
-    type(params_t), intent(in) :: p
-    is_hybrid = any(p%mesh%cluster > 1)
+  pure logical function is_hybrid(m)
+    type(mesh_settings_t), intent(in) :: m
+    is_hybrid = any(m%cluster > 1)
   end function is_hybrid
 
-  !> The parameters of the cluster-level box decomposition: nsub/cluster
+  !> The mesh settings of the cluster-level box decomposition: nsub/cluster
   !> units per direction of nel*cluster elements (the same global mesh).
-  function unit_params(p) result(q)
-    type(params_t), intent(in) :: p
-    type(params_t) :: q
-    q = p
-    q%mesh%nsub = p%mesh%nsub/p%mesh%cluster
-    q%mesh%nel = p%mesh%nel*p%mesh%cluster
-    q%mesh%cluster = 1
-  end function unit_params
+  function unit_mesh(m) result(q)
+    type(mesh_settings_t), intent(in) :: m
+    type(mesh_settings_t) :: q
+    q = m
+    q%nsub = m%nsub/m%cluster
+    q%nel = m%nel*m%cluster
+    q%cluster = 1
+  end function unit_mesh
 
   !> The cluster (id in `udec`) of box subdomain `s` of `dec`.
   pure integer(ip) function cluster_of_subdomain(dec, udec, s) result(c)

@@ -37,7 +37,7 @@ module decomposition
   use kinds, only: ip, name_len, MPI_INT_IP
   use errors, only: collective_error, fatal_error, exit_input_error
   use logger, only: log_message
-  use params, only: params_t
+  use mesh_settings, only: mesh_settings_t
   use metis_wrapper, only: metis_part_graph_kway
   use sorting, only: sort_ints, append_unmarked
   use box_mesh, only: box_mesh_t, box_mesh_init
@@ -82,10 +82,10 @@ module decomposition
 
 contains
 
-  !> Build the decomposition of `p%mesh` over the ranks of `comm`. Collective.
+  !> Build the decomposition of the mesh `m` over the ranks of `comm`. Collective.
   !> More ranks than subdomains is an input error (every rank exits, status 2).
-  subroutine build_decomposition(p, comm, dec)
-    type(params_t), intent(in) :: p
+  subroutine build_decomposition(m, comm, dec)
+    type(mesh_settings_t), intent(in) :: m
     type(MPI_Comm), intent(in) :: comm
     type(decomposition_t), intent(out) :: dec
     integer :: ierr, rank, nranks
@@ -97,24 +97,24 @@ contains
     dec%comm = comm
     dec%rank = rank
     dec%nranks = nranks
-    dec%method = p%mesh%decomposition
-    call box_mesh_init(dec%mesh, p%mesh%nsub, p%mesh%nel, p%mesh%lengths, p%mesh%distortion, &
-                       p%mesh%distortion_seed)
+    dec%method = m%decomposition
+    call box_mesh_init(dec%mesh, m%nsub, m%nel, m%lengths, m%distortion, &
+                       m%distortion_seed)
 
-    select case (trim(p%mesh%decomposition))
+    select case (trim(m%decomposition))
     case ('box')
       ! index arithmetic only: no array of the size of the mesh
-      dec%nsubdomains = product(p%mesh%nsub)
+      dec%nsubdomains = product(m%nsub)
     case ('metis')
       ! arrays over the blocks and the subdomains only
-      call metis_block_partition(dec, p%mesh%metis_block)
+      call metis_block_partition(dec, m%metis_block)
     case default
       call collective_error("group &mesh, variable decomposition: must be 'box' or 'metis' (got "// &
-                            trim(p%mesh%decomposition)//')', comm, exit_input_error)
+                            trim(m%decomposition)//')', comm, exit_input_error)
     end select
 
     if (nranks > dec%nsubdomains) then
-      write (msg, '(a,3(1x,i0),a,i0,a,i0,a,i0,a)') 'group &mesh, variable nsub: nsub =', p%mesh%nsub, &
+      write (msg, '(a,3(1x,i0),a,i0,a,i0,a,i0,a)') 'group &mesh, variable nsub: nsub =', m%nsub, &
         ' gives ', dec%nsubdomains, ' subdomains, fewer than the ', nranks, &
         ' MPI ranks; every rank needs a subdomain: run on at most ', dec%nsubdomains, &
         ' ranks or raise nsub'
@@ -122,7 +122,7 @@ contains
     end if
 
     allocate (dec%subdomain_rank(dec%nsubdomains))
-    select case (trim(p%mesh%mapping))
+    select case (trim(m%mapping))
     case ('block')
       dec%subdomain_rank = block_mapping(dec%nsubdomains, int(nranks, ip))
     case ('metis')
@@ -130,7 +130,7 @@ contains
       call MPI_Bcast(dec%subdomain_rank, dec%nsubdomains, MPI_INT_IP, 0, comm, ierr)
     case default
       call collective_error("group &mesh, variable mapping: must be 'block' or 'metis' (got "// &
-                            trim(p%mesh%mapping)//')', comm, exit_input_error)
+                            trim(m%mapping)//')', comm, exit_input_error)
     end select
     dec%local_subdomains = pack([(s, s=1, dec%nsubdomains)], dec%subdomain_rank == rank)
     if (.not. dec%is_box()) call local_element_lists(dec)

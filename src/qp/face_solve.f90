@@ -42,7 +42,7 @@
 !> (`stopped_loose`: x, g, muhat a face iterate, not the face solution),
 !> else the same CG run goes on (no restart, no Krylov space lost) and checks
 !> again each time the measure has dropped by another factor `loose`.
-!> The give-up rule of 3. with loose checks (issue 14, session 8): before the
+!> The give-up rule of 3. with loose checks: before the
 !> first loose check the extrapolation aims at the loose target (the run's
 !> next decision point), not at target; once a loose check has found no
 !> change the face is trusted (`trusted`): no give-up any more, and the run
@@ -179,7 +179,7 @@ contains
     !> x is on the face of `free` already (x_A = l_A, C x = 0) and g = A x - b on entry: no
     !> start correction, no product (SMALBE's polish round after a round that only released rows)
     logical, intent(in), optional :: g_valid
-    real(dp) :: rz, rz_new, pq, alpha, loose_at, ctol, aim
+    real(dp) :: rz, rz_new, pq, alpha, loose_at, ctol
     integer(ip) :: n, cap, unfolded
     logical :: prec, check, switched, lazy, known
 
@@ -225,7 +225,7 @@ contains
     end if
     call face_project(problem, free, g, self%r, muhat)
     self%r = -self%r
-    self%measure0 = measure(self%r)
+    self%measure0 = measure(problem, self%r, per_component)
     self%measure = self%measure0
     self%reached = self%measure <= target
     if (present(loose)) loose_at = max(loose*self%measure0, target)
@@ -236,7 +236,7 @@ contains
       self%g0(1:n) = g(1:n)
     end if
     if (.not. self%reached) then
-      call precondition(self%z)
+      call precondition(self, problem, free, prec)
       self%p = self%z
       rz = problem%dot(self%r, self%z)
       call self%ritz%begin_run()
@@ -263,45 +263,23 @@ contains
         self%r = -self%r
         ! every lazy_fold steps the range terms leave g (step 4.), so that they do not grow
         ! against the residual of a long run
-        if (lazy .and. unfolded == lazy_fold) call fold()
-        self%measure = measure(self%r)
+        if (lazy .and. unfolded == lazy_fold) then
+          call fold(self, problem, g, muhat)
+          unfolded = 0
+        end if
+        self%measure = measure(problem, self%r, per_component)
         if (self%measure <= target) then
           self%reached = .true.
           exit
         end if
-        if (check .and. self%measure <= loose_at) then
-          if (loose_check()) then
-            self%stopped_loose = .true.
-            exit
-          end if
-          ! no change: the face is trusted (no give-up, the larger step cap)
-          if (.not. self%trusted) then
-            self%trusted = .true.
-            if (present(max_steps_trusted)) cap = max(max_steps, max_steps_trusted)
-          end if
-          ! the next check once the measure has dropped by another factor loose
-          loose_at = loose*self%measure
-          check = loose_at > target
-        end if
-        ! after abort_check steps (not on a trusted face): the mean rate so far, extrapolated, must
-        ! reach the next decision point (the first loose check, else target) within max_steps
-        if (self%n_steps >= abort_check .and. .not. self%trusted) then
-          aim = target
-          if (check) aim = loose_at
-          if (self%measure >= self%measure0) then
-            self%aborted = .true.
-          else
-            self%aborted = self%n_steps*log(aim/self%measure0)/log(self%measure/self%measure0) > &
-                           abort_factor*max_steps
-          end if
-          if (self%aborted) exit
-        end if
+        if (stop_after_step(self, problem, free, x, g, muhat, target, max_steps, loose, ctol, max_steps_trusted, &
+                            loose_at, check, cap)) exit
         ! a problem that watches its face condition may change its preconditioner
         ! here (qp_problem; &solver preconditioner = 'auto'): then CG restarts, p = z
         switched = .false.
         if (prec .and. problem%watches_condition()) &
           call problem%condition_estimate(max(self%ritz%max_ratio, self%ritz%current_ratio()), switched)
-        call precondition(self%z)
+        call precondition(self, problem, free, prec)
         rz_new = problem%dot(self%r, self%z)
         if (switched) then
           self%p = self%z
@@ -319,53 +297,119 @@ contains
     call problem%track_reset()
     if (self%aborted) return
     ! 4. (face_lazy) the range terms out of g (fold)
-    if (lazy .and. unfolded > 0) call fold()
+    if (lazy .and. unfolded > 0) call fold(self, problem, g, muhat)
     muhat = -muhat
 
-  contains
+  end subroutine run
 
-    !> (face_lazy) g - g0 = A (x - x0) + C^T c: the C^T c terms out of g, c = (C C^T)^{-1} C (g - g0)
-    !> (A (x - x0) lies in Ker C: x - x0 is a sum of face directions); the coefficients of the last
-    !> projection of g, muhat, drop by the same c (those of C^T c on the face are c). One coarse solve.
-    subroutine fold()
-      self%w(1:n) = g(1:n) - self%g0(1:n)
-      call problem%eq_range_coefficient(self%w, self%cz)
-      call problem%eq_apply_t(self%cz, self%w)
-      g(1:n) = g(1:n) - self%w(1:n)
-      muhat = muhat - self%cz
-      self%g0(1:n) = g(1:n)
-      unfolded = 0
-    end subroutine fold
-
-    !> face_changes at the current iterate (mu = -muhat of the last projection of g): any?
-    logical function loose_check()
-      call problem%eq_apply_t(muhat, self%w)
-      self%w(1:n) = g(1:n) - self%w(1:n)
-      self%loose_counts = face_changes(problem, free, x, self%w, ctol)
-      loose_check = sum(self%loose_counts) > 0
-    end function loose_check
-
-    real(dp) function measure(v)
-      real(dp), intent(in) :: v(:)
-      if (per_component) then
-        measure = problem%weighted_max(v)
-      else
-        measure = problem%norm(v)
-      end if
-    end function measure
-
-    !> z = P_F M_F^{-1} r (r itself without preconditioner).
-    subroutine precondition(z)
-      real(dp), intent(out) :: z(:)
-      if (.not. prec) then
-        z = self%r
+  !> The decisions after a CG step of `run` that did not reach target: the
+  !> loose check (when the measure is <= loose_at: stop if the face would
+  !> change, else trust the face and aim at the next factor `loose`), and the
+  !> give-up rule (after abort_check steps, not on a trusted face: the mean
+  !> rate so far, extrapolated, must reach the next decision point, the first
+  !> loose check, else target, within max_steps). True: stop the run.
+  logical function stop_after_step(self, problem, free, x, g, muhat, target, max_steps, loose, ctol, &
+                                   max_steps_trusted, loose_at, check, cap) result(stop)
+    class(face_polish_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    logical, intent(in) :: free(:)
+    real(dp), intent(in) :: x(:), g(:), muhat(:)
+    real(dp), intent(in) :: target, ctol
+    integer(ip), intent(in) :: max_steps
+    real(dp), intent(in), optional :: loose
+    integer(ip), intent(in), optional :: max_steps_trusted
+    real(dp), intent(inout) :: loose_at
+    logical, intent(inout) :: check
+    integer(ip), intent(inout) :: cap
+    real(dp) :: aim
+    stop = .false.
+    if (check .and. self%measure <= loose_at) then
+      if (loose_check(self, problem, free, x, g, muhat, ctol)) then
+        self%stopped_loose = .true.
+        stop = .true.
         return
       end if
-      self%w = merge(self%r, 0.0_dp, free(1:n))
-      call problem%face_precondition(self%w, self%q)
-      self%n_precondition = self%n_precondition + 1
-      call face_project(problem, free, self%q, z, self%cz)
-    end subroutine precondition
-  end subroutine run
+      ! no change: the face is trusted (no give-up, the larger step cap)
+      if (.not. self%trusted) then
+        self%trusted = .true.
+        if (present(max_steps_trusted)) cap = max(max_steps, max_steps_trusted)
+      end if
+      ! the next check once the measure has dropped by another factor loose
+      loose_at = loose*self%measure
+      check = loose_at > target
+    end if
+    if (self%n_steps >= abort_check .and. .not. self%trusted) then
+      aim = target
+      if (check) aim = loose_at
+      if (self%measure >= self%measure0) then
+        self%aborted = .true.
+      else
+        self%aborted = self%n_steps*log(aim/self%measure0)/log(self%measure/self%measure0) > &
+                       abort_factor*max_steps
+      end if
+      stop = self%aborted
+    end if
+  end function stop_after_step
+
+  !> (face_lazy) g - g0 = A (x - x0) + C^T c: the C^T c terms out of g, c = (C C^T)^{-1} C (g - g0)
+  !> (A (x - x0) lies in Ker C: x - x0 is a sum of face directions); the coefficients of the last
+  !> projection of g, muhat, drop by the same c (those of C^T c on the face are c). One coarse solve.
+  subroutine fold(self, problem, g, muhat)
+    class(face_polish_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(inout) :: g(:), muhat(:)
+    integer(ip) :: n
+    n = problem%n
+    self%w(1:n) = g(1:n) - self%g0(1:n)
+    call problem%eq_range_coefficient(self%w, self%cz)
+    call problem%eq_apply_t(self%cz, self%w)
+    g(1:n) = g(1:n) - self%w(1:n)
+    muhat = muhat - self%cz
+    self%g0(1:n) = g(1:n)
+  end subroutine fold
+
+  !> face_changes at the current iterate (mu = -muhat of the last projection of g): any?
+  logical function loose_check(self, problem, free, x, g, muhat, ctol)
+    class(face_polish_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    logical, intent(in) :: free(:)
+    real(dp), intent(in) :: x(:), g(:), muhat(:), ctol
+    integer(ip) :: n
+    n = problem%n
+    call problem%eq_apply_t(muhat, self%w)
+    self%w(1:n) = g(1:n) - self%w(1:n)
+    self%loose_counts = face_changes(problem, free, x, self%w, ctol)
+    loose_check = sum(self%loose_counts) > 0
+  end function loose_check
+
+  !> The stopping measure of r: the problem's weighted maximum (per-component test) or ||r||.
+  real(dp) function measure(problem, v, per_component)
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(in) :: v(:)
+    logical, intent(in) :: per_component
+    if (per_component) then
+      measure = problem%weighted_max(v)
+    else
+      measure = problem%norm(v)
+    end if
+  end function measure
+
+  !> self%z = P_F M_F^{-1} r (r itself without preconditioner, prec false).
+  subroutine precondition(self, problem, free, prec)
+    class(face_polish_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    logical, intent(in) :: free(:)
+    logical, intent(in) :: prec
+    integer(ip) :: n
+    if (.not. prec) then
+      self%z = self%r
+      return
+    end if
+    n = problem%n
+    self%w = merge(self%r, 0.0_dp, free(1:n))
+    call problem%face_precondition(self%w, self%q)
+    self%n_precondition = self%n_precondition + 1
+    call face_project(problem, free, self%q, self%z, self%cz)
+  end subroutine precondition
 
 end module face_solve

@@ -40,10 +40,9 @@
 !> a_norm, a_norm is raised to it and alpha_bar = alpha_scale/a_norm follows
 !> (counted in n_norm_updates, kept across calls). It restores
 !> alpha_bar <= 2/||A|| when the caller's estimate is low; with the power
-!> method that FETI used before Lanczos (within 0.4% of ||A||) it never
-!> triggered in the hard cases (docs/RESULTS.md, "Hessian norm estimate").
+!> method (within 0.4% of ||A||) it does not trigger.
 !>
-!> The stopping rule is an object (`mprgp_stop_t`) asked every iteration with
+!> The stopping rule is an object (`inner_stop_t`, module inner_solver) asked every iteration with
 !> the current x and ||g^P||, so that SMALBE can stop the inner loop on
 !> ||g^P|| <= min(M ||C x||, eta). The stand-alone `solve` stops on
 !> ||g^P|| <= tol ||b|| (`mprgp_abs_stop_t`; always the 2-norm test: the
@@ -99,37 +98,33 @@ module mprgp
   use kinds, only: dp, ip, name_len
   use errors, only: fatal_error
   use logger, only: log_message
-  use ritz_values, only: cg_ritz_t
-  use qp_problem, only: qp_problem_t, qp_solver_t, no_lower_bound, compensated_add, qp_status_converged, &
+  use text, only: lower_case
+  use qp_problem, only: qp_problem_t, no_lower_bound, compensated_add, qp_status_converged, &
                         qp_status_max_hessian, qp_status_not_finite, qp_status_breakdown, &
                         qp_status_incompatible, qp_status_not_run, qp_message_len
+  use inner_solver, only: inner_solver_t, inner_stop_t
   implicit none
   private
 
   public :: ensure_size, preconditioned_free_gradient
 
-  !> A stopping rule asked once per iteration (and at the start) by minimize.
-  type, abstract, public :: mprgp_stop_t
+  !> The settings of MPRGP (`&solver` variables gamma, alpha_scale, expansion;
+  !> docs/INPUT.md): the one home of their defaults, ranges and echo.
+  type, public :: mprgp_settings_t
+    real(dp) :: gamma = 1                      !< proportioning parameter Gamma > 0
+    real(dp) :: alpha_scale = 1.9_dp           !< expansion step alpha_bar = alpha_scale/||A||, in (0, 2]
+    character(len=name_len) :: expansion = 'fixed'  !< 'fixed' | 'optimal'
   contains
-    procedure(stop_test_iface), deferred :: test
-  end type mprgp_stop_t
+    procedure :: check => mprgp_settings_check
+    procedure :: read_namelist => mprgp_settings_read
+    procedure :: write_namelist => mprgp_settings_write
+  end type mprgp_settings_t
 
-  abstract interface
-    !> Set `stop` when the iterate x with gradient g and projected gradient
-    !> norm `gp_norm` is accurate enough. Collective over problem%comm (may
-    !> communicate).
-    subroutine stop_test_iface(self, problem, x, g, gp_norm, stop)
-      import :: mprgp_stop_t, qp_problem_t, dp
-      class(mprgp_stop_t), intent(inout) :: self
-      class(qp_problem_t), intent(inout) :: problem
-      real(dp), intent(in) :: x(:), g(:)
-      real(dp), intent(in) :: gp_norm
-      logical, intent(out) :: stop
-    end subroutine stop_test_iface
-  end interface
+  !> The expansion step lengths (chosen once in init).
+  integer, parameter :: expansion_fixed = 1, expansion_optimal = 2
 
   !> Stop when ||g^P|| <= tol_abs.
-  type, extends(mprgp_stop_t), public :: mprgp_abs_stop_t
+  type, extends(inner_stop_t), public :: mprgp_abs_stop_t
     real(dp) :: tol_abs = 0
   contains
     procedure :: test => abs_stop_test
@@ -137,35 +132,28 @@ module mprgp
 
   !> The MPRGP solver. Counters and gp_norm describe the last call of
   !> `solve` or `minimize` (SMALBE sums them over its inner solves).
-  type, extends(qp_solver_t), public :: mprgp_t
+  type, extends(inner_solver_t), public :: mprgp_t
     real(dp) :: gamma = 1                      !< proportioning parameter Gamma > 0
     real(dp) :: alpha_scale = 1.9_dp           !< alpha_bar = alpha_scale / a_norm
-    real(dp) :: a_norm = 0                     !< ||A|| (an estimate from above is safe)
     real(dp) :: alpha_bar = 0                  !< fixed expansion step length
     character(len=name_len) :: expansion = 'fixed'  !< 'fixed' | 'optimal'
+    integer, private :: expansion_kind = expansion_fixed
     real(dp) :: tol = 1.0e-6_dp                !< stand-alone solve: stop at ||g^P|| <= tol ||b||
     integer(ip) :: max_hessian = 20000         !< stand-alone solve: Hessian multiplication cap
     real(dp) :: tol_abs = 0                    !< absolute tolerance used by the last solve
-    integer(ip) :: n_iterations = 0            !< steps of the last call (= cg + expansion + proportioning)
-    integer(ip) :: n_cg = 0                    !< CG steps
-    integer(ip) :: n_expansion = 0             !< expansion steps
-    integer(ip) :: n_proportioning = 0         !< proportioning steps
-    integer(ip) :: n_expansion_fallback = 0    !< 'optimal' expansions redone with alpha_bar
-    integer(ip) :: n_norm_updates = 0          !< times the last call raised a_norm to a Rayleigh quotient
     logical :: norm_refined = .false.          !< the problem's refined_norm was asked (once after init)
-    real(dp) :: best_gp_norm = 0               !< smallest ||g^P|| of the last call
-    integer(ip) :: n_best = 0                  !< iteration of the last call at which it was reached
-    integer(ip) :: n_preconditioner = 0        !< preconditioner applications of the last call
     logical :: preconditioned = .false.        !< the last call used the problem's preconditioner
     integer(ip) :: n_switches = 0              !< times the problem changed its preconditioner (all calls)
-    type(cg_ritz_t) :: ritz                    !< Ritz values of the CG runs (reset by the caller / solve)
     real(dp), allocatable, private :: p(:), ap(:), w_phi(:), w_x(:), w_g(:)
   contains
     procedure :: init => mprgp_init
+    procedure :: init_with => mprgp_init_with
     procedure :: free => mprgp_free
     procedure :: solve => mprgp_solve
     procedure :: is_compatible => mprgp_is_compatible
     procedure :: minimize
+    procedure :: norm_at_least => mprgp_norm_at_least
+    procedure :: variant => mprgp_variant
   end type mprgp_t
 
 contains
@@ -180,8 +168,8 @@ contains
   end subroutine abs_stop_test
 
   !> Set the parameters. a_norm: ||A|| > 0; tol: relative tolerance of the
-  !> stand-alone solve; max_hessian >= 0; gamma (default 1); alpha_scale in
-  !> (0, 2] (default 1.9); expansion 'fixed' (default) or 'optimal'.
+  !> stand-alone solve; max_hessian >= 0; gamma, alpha_scale, expansion as in
+  !> mprgp_settings_t (its defaults when absent).
   subroutine mprgp_init(self, a_norm, tol, max_hessian, gamma, alpha_scale, expansion, monitor)
     class(mprgp_t), intent(inout) :: self
     real(dp), intent(in) :: a_norm, tol
@@ -189,18 +177,30 @@ contains
     real(dp), intent(in), optional :: gamma, alpha_scale
     character(len=*), intent(in), optional :: expansion
     logical, intent(in), optional :: monitor
+    type(mprgp_settings_t) :: s
+    if (present(gamma)) s%gamma = gamma
+    if (present(alpha_scale)) s%alpha_scale = alpha_scale
+    if (present(expansion)) s%expansion = expansion
+    call self%init_with(s, a_norm, tol, max_hessian, monitor)
+  end subroutine mprgp_init
+
+  !> The settings `s` at once (see mprgp_init for the other arguments).
+  subroutine mprgp_init_with(self, s, a_norm, tol, max_hessian, monitor)
+    class(mprgp_t), intent(inout) :: self
+    type(mprgp_settings_t), intent(in) :: s
+    real(dp), intent(in) :: a_norm, tol
+    integer(ip), intent(in) :: max_hessian
+    logical, intent(in), optional :: monitor
     character(len=160) :: buf
+    character(len=:), allocatable :: variable, rule, got
 
     call self%free()
     self%a_norm = a_norm
     self%tol = tol
     self%max_hessian = max_hessian
-    self%gamma = 1
-    if (present(gamma)) self%gamma = gamma
-    self%alpha_scale = 1.9_dp
-    if (present(alpha_scale)) self%alpha_scale = alpha_scale
-    self%expansion = 'fixed'
-    if (present(expansion)) self%expansion = expansion
+    self%gamma = s%gamma
+    self%alpha_scale = s%alpha_scale
+    self%expansion = s%expansion
     self%monitor = .false.
     if (present(monitor)) self%monitor = monitor
 
@@ -211,14 +211,91 @@ contains
     end if
     if (.not. (tol >= 0 .and. tol < 1)) call fatal_error('mprgp: tol must be in [0, 1)')
     if (max_hessian < 0) call fatal_error('mprgp: max_hessian must be >= 0')
-    if (.not. (self%gamma > 0)) call fatal_error('mprgp: gamma must be > 0')
-    if (.not. (self%alpha_scale > 0 .and. self%alpha_scale <= 2)) &
-      call fatal_error('mprgp: alpha_scale must be in (0, 2]')
-    if (self%expansion /= 'fixed' .and. self%expansion /= 'optimal') &
-      call fatal_error("mprgp: expansion must be 'fixed' or 'optimal', got '"//trim(self%expansion)//"'")
+    call s%check(variable, rule, got)
+    if (len(variable) > 0) call fatal_error('mprgp: '//variable//' '//rule//' (got '//got//')')
+    self%expansion_kind = merge(expansion_optimal, expansion_fixed, self%expansion == 'optimal')
     self%alpha_bar = self%alpha_scale/self%a_norm
     self%norm_refined = .false.
-  end subroutine mprgp_init
+  end subroutine mprgp_init_with
+
+  !> The first setting out of its range: `variable` its name ('' if none),
+  !> `rule` the allowed values, `got` the value.
+  subroutine mprgp_settings_check(self, variable, rule, got)
+    class(mprgp_settings_t), intent(in) :: self
+    character(len=:), allocatable, intent(out) :: variable, rule, got
+    character(len=32) :: buf
+    variable = ''
+    rule = ''
+    got = ''
+    if (.not. (self%gamma > 0)) then
+      variable = 'gamma'
+      rule = 'must be > 0'
+      write (buf, '(g0)') self%gamma
+    else if (.not. (self%alpha_scale > 0 .and. self%alpha_scale <= 2)) then
+      variable = 'alpha_scale'
+      rule = 'must be in (0, 2]'
+      write (buf, '(g0)') self%alpha_scale
+    else if (self%expansion /= 'fixed' .and. self%expansion /= 'optimal') then
+      variable = 'expansion'
+      rule = "must be 'fixed' or 'optimal'"
+      buf = self%expansion
+    else
+      return
+    end if
+    got = trim(adjustl(buf))
+  end subroutine mprgp_settings_check
+
+  !> Read the settings' variables from the namelist group text `group`
+  !> ('&solver ... /', only this component's variables); strings lower case.
+  subroutine mprgp_settings_read(self, group, status, msg)
+    class(mprgp_settings_t), intent(inout) :: self
+    character(len=*), intent(in) :: group
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    real(dp) :: gamma, alpha_scale
+    character(len=name_len) :: expansion
+    namelist /solver/ gamma, alpha_scale, expansion
+    gamma = self%gamma
+    alpha_scale = self%alpha_scale
+    expansion = self%expansion
+    read (group, nml=solver, iostat=status, iomsg=msg)
+    if (status /= 0) return
+    self%gamma = gamma
+    self%alpha_scale = alpha_scale
+    self%expansion = lower_case(expansion)
+  end subroutine mprgp_settings_read
+
+  !> Write the settings as the namelist group '&solver ... /' (strings quoted).
+  subroutine mprgp_settings_write(self, lines, status, msg)
+    class(mprgp_settings_t), intent(in) :: self
+    character(len=*), intent(out) :: lines(:)
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    real(dp) :: gamma, alpha_scale
+    character(len=name_len) :: expansion
+    namelist /solver/ gamma, alpha_scale, expansion
+    gamma = self%gamma
+    alpha_scale = self%alpha_scale
+    expansion = self%expansion
+    lines = ''
+    write (lines, nml=solver, delim='quote', iostat=status, iomsg=msg)
+  end subroutine mprgp_settings_write
+
+  !> Raise the norm estimate to at least `bound`; alpha_bar follows.
+  subroutine mprgp_norm_at_least(self, bound)
+    class(mprgp_t), intent(inout) :: self
+    real(dp), intent(in) :: bound
+    if (bound > self%a_norm) then
+      self%a_norm = bound
+      self%alpha_bar = self%alpha_scale/self%a_norm
+    end if
+  end subroutine mprgp_norm_at_least
+
+  function mprgp_variant(self) result(text)
+    class(mprgp_t), intent(in) :: self
+    character(len=:), allocatable :: text
+    text = 'expansion '//trim(self%expansion)
+  end function mprgp_variant
 
   subroutine mprgp_free(self)
     class(mprgp_t), intent(inout) :: self
@@ -299,7 +376,7 @@ contains
     real(dp), intent(in) :: b_lin(:)
     real(dp), intent(inout) :: x(:)
     real(dp), intent(inout) :: g(:)
-    class(mprgp_stop_t), intent(inout) :: stop_rule
+    class(inner_stop_t), intent(inout) :: stop_rule
     integer(ip), intent(in) :: max_hessian
     logical, intent(in) :: gradient_given
     real(dp) :: stats(4), gp, alpha_f, alpha_cg, pap, a_refined
@@ -517,7 +594,7 @@ contains
     if (budget < 1) return
     call gradient_part(problem, x, g, .false., self%w_phi)
 
-    if (self%expansion == 'optimal' .and. budget >= 2) then
+    if (self%expansion_kind == expansion_optimal .and. budget >= 2) then
       call apply_hessian(self, problem, self%w_phi, self%ap)
       hi = 0
       lo = 0

@@ -17,7 +17,6 @@ program measure_explicit_f
   use feti_operators, only: feti_t
   use dual_problem, only: dual_problem_t
   use smalbe, only: smalbe_t, smalbe_settings_t
-  use tfeti_dualization, only: smalbe_settings
   use feti_test_support, only: small_case
   use mpi_f08, only: MPI_Init, MPI_Finalize, MPI_COMM_WORLD, MPI_Comm_rank
   implicit none
@@ -172,7 +171,7 @@ contains
     type(smalbe_t) :: solver
     type(smalbe_settings_t) :: sp
     call hat%init(op, p%solver%rho_scale)
-    sp = smalbe_settings(p%solver)
+    sp = p%solver%smalbe
     sp%tol = tol
     sp%max_hessian = 20000
     sp%max_outer = 2000

@@ -12,7 +12,6 @@ program measure_reconstruction
   use feti_operators, only: feti_t, local_field_t
   use dual_problem, only: dual_problem_t
   use smalbe, only: smalbe_t, smalbe_settings_t
-  use tfeti_dualization, only: smalbe_settings
   use reconstruction, only: dual_gradient, alpha_new, alpha_standard, standard_cost_t, coarse_vector_norm
   use kkt, only: kkt_residuals_t, check_kkt
   use feti_test_support, only: small_case
@@ -96,7 +95,7 @@ contains
     character(len=*), intent(in) :: label
     type(smalbe_t) :: solver
     type(smalbe_settings_t) :: settings
-    settings = smalbe_settings(p%solver)
+    settings = p%solver%smalbe
     settings%tol = tol
     settings%monitor = .false.
     call solver%init_with(settings, max(op%norm_pfp(), problem%rho)/problem%scale)

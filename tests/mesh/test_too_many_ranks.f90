@@ -17,7 +17,7 @@ program test_too_many_ranks
   p = default_params()
   p%mesh%nsub = [2_ip, 1_ip, 1_ip]
   p%mesh%nel = [2_ip, 2_ip, 2_ip]
-  call build_decomposition(p, MPI_COMM_WORLD, dec)
+  call build_decomposition(p%mesh, MPI_COMM_WORLD, dec)
   write (error_unit, '(a)') 'FAIL: build_decomposition returned with more ranks than subdomains'
   error stop 1
 end program test_too_many_ranks

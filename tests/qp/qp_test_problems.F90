@@ -21,11 +21,12 @@ module qp_test_problems
   use kinds, only: dp, ip, MPI_REAL_DP
   use errors, only: fatal_error
   use qp_problem, only: qp_problem_t, no_lower_bound
+  use smalbe, only: smalbe_settings_t
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Allgatherv
   implicit none
   private
 
-  public :: make_case, count_slack
+  public :: make_case, count_slack, plain_smalbe
 
   !> The global (replicated) data of one test QP and its exact solution.
   type, public :: qp_case_t
@@ -73,6 +74,35 @@ module qp_test_problems
   end type dense_qp_t
 
 contains
+
+  !> SMALBE-M as in the literature, the solver these tests were written for
+  !> (the library's defaults are the program's: polish, adaptive rho and the
+  !> monitor on): no polish, rho constant, no monitor; tol and the caps given,
+  !> the inner MPRGP's expansion and the monitor optional.
+  function plain_smalbe(tol, max_outer, max_hessian, expansion, monitor) result(s)
+    real(dp), intent(in) :: tol
+    integer(ip), intent(in) :: max_outer, max_hessian
+    character(len=*), intent(in), optional :: expansion
+    logical, intent(in), optional :: monitor
+    type(smalbe_settings_t) :: s
+    s%tol = tol
+    s%max_outer = max_outer
+    s%max_hessian = max_hessian
+    s%rho_growth = 1
+    s%rho_window = 1
+    s%rho_stall = 0
+    s%monitor = .false.
+    if (present(monitor)) s%monitor = monitor
+    if (present(expansion)) s%inner%expansion = expansion
+    s%polish%window = 0
+    s%polish%rounds = 3
+    s%polish%release = .false.
+    s%polish%settle = 0
+    s%polish%loose = 0
+    s%polish%predict = 0
+    s%polish%release_share = 0
+    s%polish%first = .false.
+  end function plain_smalbe
 
   !> Build a case (see the module). m = 0: no equality constraint.
   subroutine make_case(cs, n, m, cond, n_active, n_degenerate, n_unbounded, orthonormal, seed, rho_scale)

@@ -66,9 +66,9 @@ contains
     p%mesh%nsub = [1, 1, 1]
     p%mesh%nel = [nel, nel, nel]
     p%mesh%distortion = 0.2_dp
-    call build_decomposition(p, MPI_COMM_SELF, dec)
+    call build_decomposition(p%mesh, MPI_COMM_SELF, dec)
     call build_subdomain(dec, 1_ip, sub)
-    call assemble_subdomain(p, dec, sub)
+    call assemble_subdomain(p%material, p%load, dec, sub)
   end subroutine cube
 
   subroutine size_table(nels, reps)

@@ -1,4 +1,4 @@
-!> Projected conjugate gradients for the dual of a problem without contact
+!> (Tests only.) Projected conjugate gradients for the dual of a problem without contact
 !> rows (the classical FETI solver): min 1/2 l^T F l - l^T d  s.t.  G l = e,
 !> started from lambda~ and kept in lambda~ + Im P. Then the rigid body
 !> amplitudes alpha = (G G^T)^{-1} G (F lambda - d).

@@ -1,0 +1,141 @@
+!> The settings of the mesh and its decomposition (`&mesh`, docs/INPUT.md):
+!> the box, its subdomains, their mapping to ranks and the clusters of hybrid
+!> TFETI: the one home of their defaults, of the checks within the group
+!> (`check`; those against other groups are params' check_params) and of
+!> the namelist variables (`read_namelist`, `write_namelist`; params hands
+!> the group over). Used by decomposition and clusters.
+module mesh_settings
+  use kinds, only: dp, ip, i8, name_len
+  use text, only: lower_case
+  implicit none
+  private
+
+  type, public :: mesh_settings_t
+    integer(ip) :: nsub(3) = [2, 2, 2]        !< subdomains per direction
+    integer(ip) :: nel(3) = [4, 4, 4]         !< elements per subdomain per direction
+    real(dp) :: lengths(3) = [1, 1, 1]        !< box size Lx, Ly, Lz [mm]
+    real(dp) :: distortion = 0                !< inner node offset, fraction of h
+    integer(ip) :: distortion_seed = 1        !< seed of the node offsets
+    character(len=name_len) :: decomposition = 'box'  !< 'box' | 'metis'
+    character(len=name_len) :: mapping = 'block'      !< subdomains to ranks: 'block' | 'metis'
+    !> hybrid TFETI: subdomains per cluster per direction (1,1,1: plain TFETI;
+    !> 0,0,0: chosen by `auto_cluster` when `read_params` reads the input; a
+    !> params_t made in code and never resolved keeps 0,0,0 = plain TFETI)
+    integer(ip) :: cluster(3) = [0, 0, 0]
+    !> decomposition = 'metis': elements per block edge of the block grid METIS
+    !> partitions (0: automatic, see src/mesh/decomposition.f90)
+    integer(ip) :: metis_block = 0
+    !> not namelist variables: set by `resolve_cluster` (read_params) when
+    !> `cluster` was 0,0,0: then `cluster` holds the choice, and the reason
+    logical :: cluster_auto = .false.
+    character(len=160) :: cluster_choice = ''
+  contains
+    procedure :: check => mesh_settings_check
+    procedure :: read_namelist => mesh_settings_read
+    procedure :: write_namelist => mesh_settings_write
+  end type mesh_settings_t
+
+contains
+
+  !> The first value out of its range: `variable` its name ('' if none),
+  !> `rule` the allowed values, `got` the value(s).
+  subroutine mesh_settings_check(self, variable, rule, got)
+    class(mesh_settings_t), intent(in) :: self
+    character(len=:), allocatable, intent(out) :: variable, rule, got
+    variable = ''
+    rule = ''
+    got = ''
+    if (any(self%nsub < 1)) then
+      call bad('nsub', 'each entry must be >= 1', ints(self%nsub))
+    else if (any(self%nel < 1)) then
+      call bad('nel', 'each entry must be >= 1', ints(self%nel))
+    else if (any(self%lengths <= 0)) then
+      call bad('lengths', 'each entry must be > 0', reals(self%lengths))
+    else if (self%distortion < 0 .or. self%distortion >= 0.5_dp) then
+      call bad('distortion', 'must be in [0, 0.5)', reals([self%distortion]))
+    else if (.not. any(self%decomposition == [character(len=8) :: 'box', 'metis'])) then
+      call bad('decomposition', "must be 'box' or 'metis'", self%decomposition)
+    else if (.not. any(self%mapping == [character(len=8) :: 'block', 'metis'])) then
+      call bad('mapping', "must be 'block' or 'metis'", self%mapping)
+    else if (.not. (all(self%cluster == 0) .or. all(self%cluster >= 1))) then
+      call bad('cluster', 'each entry must be >= 1, or all three 0 (automatic choice)', ints(self%cluster))
+    else if (self%metis_block < 0) then
+      call bad('metis_block', 'must be 0 (automatic) or a block edge b >= 1 in elements', ints([self%metis_block]))
+    else if (divides_not()) then
+      call bad('cluster', 'must divide nsub in every direction (nsub = '//ints(self%nsub)//')', ints(self%cluster))
+    else if (any(self%cluster > 1) .and. self%decomposition /= 'box') then
+      call bad('cluster', "> 1 (hybrid TFETI) needs decomposition = 'box'", ints(self%cluster))
+    else if (product(int(self%nsub, i8))*product(int(self%nel, i8)) > 2_i8**27) then
+      call bad('nsub, nel', 'give at most 2**27 elements in all', ints(self%nsub)//' x '//ints(self%nel))
+    end if
+  contains
+    subroutine bad(name, text, value)
+      character(len=*), intent(in) :: name, text, value
+      variable = name
+      rule = text
+      got = trim(value)
+    end subroutine bad
+    logical function divides_not()
+      divides_not = .false.
+      if (all(self%cluster >= 1)) divides_not = any(mod(self%nsub, self%cluster) /= 0)
+    end function divides_not
+  end subroutine mesh_settings_check
+
+  !> Read the group text `group` ('&mesh ... /'); strings lower case.
+  subroutine mesh_settings_read(self, group, status, msg)
+    class(mesh_settings_t), intent(inout) :: self
+    character(len=*), intent(in) :: group
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    integer(ip) :: nsub(3), nel(3), cluster(3), metis_block, distortion_seed
+    real(dp) :: lengths(3), distortion
+    character(len=name_len) :: decomposition, mapping
+    namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping, cluster, metis_block
+    nsub = self%nsub; nel = self%nel; lengths = self%lengths
+    distortion = self%distortion; distortion_seed = self%distortion_seed
+    decomposition = self%decomposition; mapping = self%mapping; cluster = self%cluster
+    metis_block = self%metis_block
+    read (group, nml=mesh, iostat=status, iomsg=msg)
+    if (status /= 0) return
+    self%nsub = nsub; self%nel = nel; self%lengths = lengths
+    self%distortion = distortion; self%distortion_seed = distortion_seed
+    self%decomposition = lower_case(decomposition); self%mapping = lower_case(mapping)
+    self%cluster = cluster; self%metis_block = metis_block
+  end subroutine mesh_settings_read
+
+  !> Write the group as the namelist '&mesh ... /' (strings quoted).
+  subroutine mesh_settings_write(self, lines, status, msg)
+    class(mesh_settings_t), intent(in) :: self
+    character(len=*), intent(out) :: lines(:)
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    integer(ip) :: nsub(3), nel(3), cluster(3), metis_block, distortion_seed
+    real(dp) :: lengths(3), distortion
+    character(len=name_len) :: decomposition, mapping
+    namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping, cluster, metis_block
+    nsub = self%nsub; nel = self%nel; lengths = self%lengths
+    distortion = self%distortion; distortion_seed = self%distortion_seed
+    decomposition = self%decomposition; mapping = self%mapping; cluster = self%cluster
+    metis_block = self%metis_block
+    lines = ''
+    write (lines, nml=mesh, delim='quote', iostat=status, iomsg=msg)
+  end subroutine mesh_settings_write
+
+  !> The values of v separated by blanks (for messages).
+  function ints(v) result(s)
+    integer(ip), intent(in) :: v(:)
+    character(len=:), allocatable :: s
+    character(len=256) :: buf
+    write (buf, '(*(i0,:," "))') v
+    s = trim(buf)
+  end function ints
+
+  !> The values of v separated by blanks, 6 significant digits.
+  function reals(v) result(s)
+    real(dp), intent(in) :: v(:)
+    character(len=:), allocatable :: s
+    character(len=256) :: buf
+    write (buf, '(*(g0.6,:," "))') v
+    s = trim(buf)
+  end function reals
+end module mesh_settings
