@@ -190,6 +190,133 @@ def check_same_as(outdir, other, tol):
     check(diff <= tol * scale, "same displacements as %s: max diff / max |u| = %.3e <= %.1e" % (other, diff / scale, tol))
 
 
+def solver_tol(groups):
+    """The run's own tolerance (&solver tol, docs/INPUT.md default 1e-6): every bound on the
+    solution's error or on its KKT residuals is a constant times it."""
+    return float(value_of(groups, "solver", "tol", "1e-6").lower().replace("d", "e"))
+
+
+def node_ijk(x, groups):
+    """Global mesh indices (i, j, k) of points x (n, 3) of the box mesh: a node is moved by at most
+    distortion * h < h/2 per component, so rounding x / h gives its indices."""
+    nsub = np.array([int(v) for v in value_of(groups, "mesh", "nsub", "2,2,2").split(",")])
+    nel = np.array([int(v) for v in value_of(groups, "mesh", "nel", "4,4,4").split(",")])
+    lengths = np.array([float(v) for v in value_of(groups, "mesh", "lengths", "1,1,1").split(",")])
+    h = lengths / (nsub * nel)
+    return np.rint(x / h).astype(np.int64), h
+
+
+def check_reference(outdir, case_file, groups, factor):
+    """The program's displacements and contact pressures against the undecomposed reference
+    solution of tests/app/contact_reference.py (a primal-dual active set solve of the global Q1
+    problem, built from docs/CASES.md without any module of the program). docs/INPUT.md states
+    what tol buys: max |u - u*| / max |u*| of about 20 tol; the bound is factor * tol."""
+    import contact_reference
+    tol = solver_tol(groups)
+    ref = contact_reference.Problem(contact_reference.Case.read(case_file))
+    u_ref, lam = ref.solve()
+    res = ref.kkt_residuals()
+    check(max(res.values()) <= 1e-10, "reference solution: KKT residuals %s <= 1e-10"
+          % ", ".join("%s %.1e" % kv for kv in res.items()))
+    nact = int((lam > 0).sum())
+    print("reference: %d dofs, %d contact rows, %d active, %d active-set iterations, total force %.6e"
+          % (ref.ndof, len(lam), nact, ref.iterations, lam.sum()))
+    with fields(outdir) as h5:
+        x = h5["coordinates"][...]
+        u = h5["displacement"][...]
+        xc = h5["contact_coordinates"][...]
+        pc = h5["contact_pressure"][...]
+    ijk, h = node_ijk(x, groups)
+    idx = ref.mesh.node_index(ijk)
+    check(len(x) >= ref.mesh.nn and set(idx.tolist()) == set(range(ref.mesh.nn)),
+          "every node of the reference mesh (%d) has a copy in the output (%d copies)" % (ref.mesh.nn, len(x)))
+    dx = np.abs(x - ref.mesh.x[idx]).max() / h.min()
+    check(dx <= 1e-12, "same node coordinates as the reference mesh: max |x - x_ref| / h = %.1e <= 1e-12" % dx)
+    scale = np.abs(u_ref).max()
+    err = np.abs(u - u_ref[idx]).max() / scale
+    check(err <= factor * tol, "max |u - u_ref| / max |u_ref| = %.3e <= %g tol = %.1e (%.2f tol)"
+          % (err, factor, factor * tol, err / tol))
+    # contact pressures, node by node (the output holds one row per physical contact node)
+    ijk_c, _ = node_ijk(xc, groups)
+    where = {int(n): i for i, n in enumerate(ref.contact_nodes)}
+    rows = [where.get(int(n), -1) for n in ref.mesh.node_index(ijk_c)]
+    check(len(rows) == len(ref.contact_nodes) and sorted(rows) == list(range(len(ref.contact_nodes))),
+          "the output's contact rows are the reference's %d contact nodes (got %d)" % (len(ref.contact_nodes), len(rows)))
+    if len(rows) == len(ref.contact_nodes) and min(rows, default=0) >= 0:
+        p_ref = ref.pressure()[rows]
+        pscale = max(np.abs(p_ref).max(), 1e-300)
+        perr = np.abs(pc - p_ref).max() / pscale
+        check(perr <= factor * tol, "max |p - p_ref| / max p_ref = %.3e <= %g tol (%.2f tol)"
+              % (perr, factor, perr / tol))
+    return ref, nact
+
+
+def check_partly_active(ref, nact):
+    """The case is one of partly active contact (else a reference check on it proves less)."""
+    check(0 < nact < len(ref.contact_nodes), "partly active contact: %d of %d contact rows active in the reference"
+          % (nact, len(ref.contact_nodes)))
+
+
+def check_rigid(outdir, groups, factor):
+    """No contact and no load but the top face's displacement d: the exact solution is the rigid
+    translation u = d at every node, with every contact force 0 and every gap open."""
+    tol = solver_tol(groups)
+    d = np.array([float(v) for v in value_of(groups, "boundary", "top_displacement", "0,0,-0.005").split(",")])
+    with fields(outdir) as h5:
+        u = h5["displacement"][...]
+        pc = h5["contact_pressure"][...]
+        gap = h5["contact_gap"][...]
+    err = np.abs(u - d).max() / np.abs(d).max()
+    check(len(u) > 0 and err <= factor * tol, "rigid translation: max |u - d| / |d| = %.3e <= %g tol" % (err, factor))
+    check(len(pc) > 0 and np.all(pc == 0), "every contact pressure is 0 (%d rows, max %.3e)" % (len(pc), np.abs(pc).max(initial=0)))
+    check(len(gap) > 0 and gap.min() > 0, "every gap open (min %.3e)" % gap.min(initial=0))
+
+
+def check_no_contact(outdir):
+    """Every contact multiplier is 0 (the obstacle is out of reach)."""
+    with fields(outdir) as h5:
+        pc = h5["contact_pressure"][...]
+        gap = h5["contact_gap"][...]
+    check(len(pc) > 0 and np.all(pc == 0), "every contact multiplier is 0 (%d rows, max pressure %.3e)"
+          % (len(pc), np.abs(pc).max(initial=0)))
+    check(len(gap) > 0 and gap.min() > 0, "every gap open (min %.3e)" % gap.min(initial=0))
+
+
+def check_hertz(outdir, groups):
+    """docs/CASES.md "Hertz check": with the computed total force F, E* = E / (1 - nu^2),
+    a = (3 F R / (4 E*))^(1/3), p0 = 3 F / (2 pi a^2). On a mesh of size h the computed contact radius
+    (the largest distance from the axis of a node under pressure) lies within one diagonal of an
+    element, sqrt(2) h, of a; the peak nodal pressure is within 10% + (h/a)^2 of p0 (a nodal
+    pressure is the mean of p over a tributary area of width h around the peak: a relative
+    deficit of about (h/a)^2/... of a parabola of curvature p0/a^2; finite-size effects a few %)."""
+    young = float(value_of(groups, "material", "young", "2.1e5"))
+    nu = float(value_of(groups, "material", "poisson", "0.3"))
+    radius = float(value_of(groups, "obstacle", "radius", "1.0"))
+    lengths = np.array([float(v) for v in value_of(groups, "mesh", "lengths", "1,1,1").split(",")])
+    with fields(outdir) as h5:
+        xc = h5["contact_coordinates"][...]
+        pc = h5["contact_pressure"][...]
+    _, h = node_ijk(xc, groups)
+    area = np.full(len(xc), h[0] * h[1])
+    for c in range(2):
+        area[(np.abs(xc[:, c]) < 1e-9) | (np.abs(xc[:, c] - lengths[c]) < 1e-9)] /= 2
+    force = float((pc * area).sum())
+    estar = young / (1 - nu ** 2)
+    a = (3 * force * radius / (4 * estar)) ** (1 / 3)
+    p0 = 3 * force / (2 * np.pi * a ** 2)
+    r = np.hypot(xc[:, 0] - lengths[0] / 2, xc[:, 1] - lengths[1] / 2)
+    rc = r[pc > 0].max()
+    hh = max(h[0], h[1])
+    print("Hertz: F = %.4e, a = %.4f (h = %.4f, a/h = %.2f), contact radius %.4f, p0 = %.4e, peak pressure %.4e"
+          % (force, a, hh, a / hh, rc, p0, pc.max()))
+    check(a >= 3 * hh, "the contact zone spans at least 3 elements (a / h = %.2f)" % (a / hh))
+    check(abs(rc - a) <= np.sqrt(2) * hh, "contact radius %.4f = Hertz a %.4f within sqrt(2) h = %.4f"
+          % (rc, a, np.sqrt(2) * hh))
+    bound = 0.1 + (hh / a) ** 2
+    check(abs(pc.max() - p0) <= bound * p0, "peak pressure %.4e = Hertz p0 %.4e within %.3f p0 (rel. diff %.3f)"
+          % (pc.max(), p0, bound, abs(pc.max() - p0) / p0))
+
+
 def check_cluster(outdir, groups, expect):
     """&mesh cluster: 'auto_hybrid' = chosen automatically and > 1 (dividing nsub), 'auto_plain' = chosen
     automatically and 1,1,1; report.json records the clusters used, whether they were automatic and why."""
@@ -290,6 +417,16 @@ def main():
             check_report(outdir, args.ranks)
         elif kind == "xdmf":
             check_xdmf(outdir)
+        elif kind == "reference":
+            check_reference(outdir, path, groups, float(rest[0]))
+        elif kind == "reference_partial":
+            check_partly_active(*check_reference(outdir, path, groups, float(rest[0])))
+        elif kind == "rigid":
+            check_rigid(outdir, groups, float(rest[0]))
+        elif kind == "no_contact":
+            check_no_contact(outdir)
+        elif kind == "hertz":
+            check_hertz(outdir, groups)
         elif kind == "cluster":
             check_cluster(outdir, groups, rest[0])
         elif kind == "alpha_agree":
