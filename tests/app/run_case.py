@@ -309,7 +309,7 @@ def check_rigid(outdir, groups, factor):
     err = np.abs(u - d).max() / np.abs(d).max()
     check(len(u) > 0 and err <= factor * tol, "rigid translation: max |u - d| / |d| = %.3e <= %g tol" % (err, factor))
     check(len(pc) > 0 and np.all(pc == 0), "every contact pressure is 0 (%d rows, max %.3e)" % (len(pc), np.abs(pc).max(initial=0)))
-    check(len(gap) > 0 and gap.min() > 0, "every gap open (min %.3e)" % gap.min(initial=0))
+    check(len(gap) > 0 and gap.min() > 0, "every gap open (min %.3e)" % (gap.min() if len(gap) else float("nan")))
 
 
 def check_no_contact(outdir):
@@ -319,16 +319,19 @@ def check_no_contact(outdir):
         gap = h5["contact_gap"][...]
     check(len(pc) > 0 and np.all(pc == 0), "every contact multiplier is 0 (%d rows, max pressure %.3e)"
           % (len(pc), np.abs(pc).max(initial=0)))
-    check(len(gap) > 0 and gap.min() > 0, "every gap open (min %.3e)" % gap.min(initial=0))
+    check(len(gap) > 0 and gap.min() > 0, "every gap open (min %.3e)" % (gap.min() if len(gap) else float("nan")))
 
 
 def check_hertz(outdir, groups):
-    """docs/CASES.md "Hertz check": with the computed total force F, E* = E / (1 - nu^2),
-    a = (3 F R / (4 E*))^(1/3), p0 = 3 F / (2 pi a^2). On a mesh of size h the computed contact radius
-    (the largest distance from the axis of a node under pressure) lies within one diagonal of an
-    element, sqrt(2) h, of a; the peak nodal pressure is within 10% + (h/a)^2 of p0 (a nodal
-    pressure is the mean of p over a tributary area of width h around the peak: a relative
-    deficit of about (h/a)^2/... of a parabola of curvature p0/a^2; finite-size effects a few %)."""
+    """docs/CASES.md "Hertz check": with the computed total force F (the sum of the output's
+    pressures times their tributary areas), E* = E / (1 - nu^2), a = (3 F R / (4 E*))^(1/3),
+    p0 = 3 F / (2 pi a^2). Bounds suited to a mesh of size h, on a zone of at least 2.5 elements
+    in radius (asserted):
+    - contact radius (the largest distance from the axis of a node under pressure) within h of a:
+      the contact edge lies between the last node in contact and the next one;
+    - peak nodal pressure within (0.05 + (h/a)^2 / 12) p0: a few percent for the finite body
+      (docs/CASES.md), plus the mean of p0 sqrt(1 - r^2/a^2) ~ p0 (1 - r^2 / (2 a^2)) over the
+      h x h tributary square of the centre node, which lies (h/a)^2/12 below p0."""
     young = float(value_of(groups, "material", "young", "2.1e5"))
     nu = float(value_of(groups, "material", "poisson", "0.3"))
     radius = float(value_of(groups, "obstacle", "radius", "1.0"))
@@ -349,10 +352,9 @@ def check_hertz(outdir, groups):
     hh = max(h[0], h[1])
     print("Hertz: F = %.4e, a = %.4f (h = %.4f, a/h = %.2f), contact radius %.4f, p0 = %.4e, peak pressure %.4e"
           % (force, a, hh, a / hh, rc, p0, pc.max()))
-    check(a >= 3 * hh, "the contact zone spans at least 3 elements (a / h = %.2f)" % (a / hh))
-    check(abs(rc - a) <= np.sqrt(2) * hh, "contact radius %.4f = Hertz a %.4f within sqrt(2) h = %.4f"
-          % (rc, a, np.sqrt(2) * hh))
-    bound = 0.1 + (hh / a) ** 2
+    check(a >= 2.5 * hh, "the contact zone spans at least 2.5 elements in radius (a / h = %.2f)" % (a / hh))
+    check(abs(rc - a) <= hh, "contact radius %.4f = Hertz a %.4f within h = %.4f" % (rc, a, hh))
+    bound = 0.05 + (hh / a) ** 2 / 12
     check(abs(pc.max() - p0) <= bound * p0, "peak pressure %.4e = Hertz p0 %.4e within %.3f p0 (rel. diff %.3f)"
           % (pc.max(), p0, bound, abs(pc.max() - p0) / p0))
 
