@@ -291,6 +291,15 @@ def check_kkt_failed(outdir, groups, log):
         check(abs(logged[name] - worst) <= 1e-3 * worst, "the log names %s = %.3e, the largest" % (name, logged[name]))
 
 
+def check_polish_accepted(outdir):
+    """The polish (SMALBE's exact face solve; with the default polish_first it starts the solve)
+    must produce the solution: at least one polish after which the outer stopping test held at
+    once (report.json solver.polish_accepted > 0)."""
+    s = solver_report(outdir)
+    check(s.get("polish_count", 0) > 0, "a polish was made (polish_count %s)" % s.get("polish_count"))
+    check(s.get("polish_accepted", 0) > 0, "a polish was accepted at once (polish_accepted %s)" % s.get("polish_accepted"))
+
+
 def check_partly_active(ref, nact):
     """The case is one of partly active contact (else a reference check on it proves less)."""
     check(0 < nact < len(ref.contact_nodes), "partly active contact: %d of %d contact rows active in the reference"
@@ -463,6 +472,8 @@ def main():
             check_reference(outdir, path, groups, float(rest[0]))
         elif kind == "reference_partial":
             check_partly_active(*check_reference(outdir, path, groups, float(rest[0])))
+        elif kind == "polish_accepted":
+            check_polish_accepted(outdir)
         elif kind == "kkt_failed":
             check_kkt_failed(outdir, groups, out)
         elif kind == "rigid":
