@@ -36,7 +36,10 @@ endif()
 
 # pFUnit could not be had: the tests that need it skip, unless it is required.
 macro(_fc_pf_unavailable reason)
+  # the reason goes into the skip message of every pFUnit test (a `sh -c '...'` command): no quotes,
+  # no list separators
   set(FETICONTACT_PFUNIT_MISSING "${reason}")
+  string(REGEX REPLACE "[\"';`$\\]" " " FETICONTACT_PFUNIT_MISSING "${FETICONTACT_PFUNIT_MISSING}")
   if(FETICONTACT_REQUIRE_PFUNIT)
     message(FATAL_ERROR "pFUnit: ${reason}; pFUnit is required (FETICONTACT_REQUIRE_PFUNIT=ON"
       "${_fc_pf_ci_note}): the pFUnit tests cannot run. Install pFUnit ${FETICONTACT_PFUNIT_VERSION} "
