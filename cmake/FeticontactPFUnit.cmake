@@ -20,18 +20,21 @@ set(FETICONTACT_PFUNIT_VERSION 4.14.0)
 set(FETICONTACT_PFUNIT_AVAILABLE OFF)
 set(FETICONTACT_PFUNIT_MISSING "")
 
-# Required (a failure to find or build it fails the configure) in CI or when asked.
-if(DEFINED ENV{FETICONTACT_REQUIRE_PFUNIT})
-  set(_fc_pf_require_default "$ENV{FETICONTACT_REQUIRE_PFUNIT}")
-elseif("$ENV{CI}" MATCHES "^([Tt][Rr][Uu][Ee]|1|[Yy][Ee][Ss]|[Oo][Nn])$")
-  set(_fc_pf_require_default ON)
-else()
-  set(_fc_pf_require_default OFF)
-endif()
-if(DEFINED ENV{FETICONTACT_REQUIRE_PFUNIT} OR NOT DEFINED FETICONTACT_REQUIRE_PFUNIT)
-  # the environment decides afresh at every configure (CI=true or the variable given now)
-  set(FETICONTACT_REQUIRE_PFUNIT ${_fc_pf_require_default} CACHE BOOL
-      "Fail the configure when pFUnit can be neither found nor built (default ON when CI=true)" FORCE)
+# Required (a failure to find or build it fails the configure) in CI or when asked: the CMake
+# option FETICONTACT_REQUIRE_PFUNIT, or the environment variable of that name (a true value), or
+# the environment variable CI (true, 1, yes, on). The environment is read at every configure and
+# never stored in the cache, so a build folder configured once in CI or with the variable does
+# not keep requiring pFUnit later.
+option(FETICONTACT_REQUIRE_PFUNIT "Fail the configure when pFUnit can be neither found nor built" OFF)
+set(_fc_pf_true "^([Tt][Rr][Uu][Ee]|1|[Yy][Ee][Ss]|[Oo][Nn])$")
+set(_fc_pf_required ${FETICONTACT_REQUIRE_PFUNIT})
+set(_fc_pf_ci_note "")
+if("$ENV{FETICONTACT_REQUIRE_PFUNIT}" MATCHES "${_fc_pf_true}")
+  set(_fc_pf_required ON)
+  set(_fc_pf_ci_note ", from the environment")
+elseif("$ENV{CI}" MATCHES "${_fc_pf_true}")
+  set(_fc_pf_required ON)
+  set(_fc_pf_ci_note ", the default with CI=$ENV{CI}")
 endif()
 
 # pFUnit could not be had: the tests that need it skip, unless it is required.
@@ -40,7 +43,7 @@ macro(_fc_pf_unavailable reason)
   # no list separators
   set(FETICONTACT_PFUNIT_MISSING "${reason}")
   string(REGEX REPLACE "[\"';`$\\]" " " FETICONTACT_PFUNIT_MISSING "${FETICONTACT_PFUNIT_MISSING}")
-  if(FETICONTACT_REQUIRE_PFUNIT)
+  if(_fc_pf_required)
     message(FATAL_ERROR "pFUnit: ${reason}; pFUnit is required (FETICONTACT_REQUIRE_PFUNIT=ON"
       "${_fc_pf_ci_note}): the pFUnit tests cannot run. Install pFUnit ${FETICONTACT_PFUNIT_VERSION} "
       "(-DCMAKE_PREFIX_PATH=<its prefix>), put its archive in ../shared/third_party, or set "
@@ -51,11 +54,6 @@ macro(_fc_pf_unavailable reason)
     "-DCMAKE_PREFIX_PATH=<its prefix>, or set FETICONTACT_PFUNIT_URL (FETICONTACT_REQUIRE_PFUNIT=ON makes "
     "this an error, as in CI).")
 endmacro()
-if("$ENV{CI}" MATCHES "^([Tt][Rr][Uu][Ee]|1|[Yy][Ee][Ss]|[Oo][Nn])$")
-  set(_fc_pf_ci_note ", the default with CI=$ENV{CI}")
-else()
-  set(_fc_pf_ci_note "")
-endif()
 
 # feticontact_add_pfunit_test(<name> SOURCES <x.pf>... [LIBS <targets>] MAX_PES <n>
 #                             [LABELS <labels>] [TIMEOUT <s>] [DEFINITIONS <defs>])
