@@ -10,11 +10,12 @@ module feti_test_support
   use subdomain, only: subdomain_t
   use lapack_interfaces, only: dsyev
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gather, MPI_Gatherv, MPI_INTEGER, MPI_Allreduce, &
-    MPI_SUM, MPI_MAX
+    MPI_SUM, MPI_MAX, MPI_Allgather, MPI_Allgatherv
   implicit none
   private
 
-  public :: small_case, gather_keyed, coarse_norm, kplus_condition, coarse_condition, dense_k_condition
+  public :: small_case, gather_keyed, coarse_norm, kplus_condition, coarse_condition, dense_k_condition, &
+            dense_pfp_condition
 
   !> kplus_condition's estimate (through op%local_solve, the code under test) is bounded before
   !> use by this factor times the dense LAPACK condition number of K on its range
@@ -200,6 +201,39 @@ contains
     end do
     call MPI_Allreduce(mine, cond, 1, MPI_REAL_DP, MPI_MAX, op%comm(), ierr)
   end function dense_k_condition
+
+  !> The condition number of P F P on Im P: P F P assembled column by column (P F P e_j for every
+  !> dual row j, the owned parts gathered in row_offset order) and its eigenvalues from LAPACK's
+  !> dsyev, lambda_max / the smallest one above 1e-8 lambda_max (Ker P: 0 to rounding). For
+  !> small cases only (n^2 doubles on every rank). Independent of any CG run: a bound scaled by it
+  !> cannot grow with a solver under test. Collective.
+  real(dp) function dense_pfp_condition(op) result(cond)
+    type(feti_t), intent(inout) :: op
+    real(dp), allocatable :: a(:, :), e(:), pe(:), fpe(:), y(:), w(:), work(:)
+    integer, allocatable :: counts(:), displs(:)
+    integer :: n, ntot, nranks, j, off, info, ierr
+    n = int(op%n_own())
+    off = int(op%row_offset())
+    call MPI_Comm_size(op%comm(), nranks, ierr)
+    allocate (counts(nranks), displs(nranks))
+    call MPI_Allgather(n, 1, MPI_INTEGER, counts, 1, MPI_INTEGER, op%comm(), ierr)
+    call MPI_Allgather(off, 1, MPI_INTEGER, displs, 1, MPI_INTEGER, op%comm(), ierr)
+    ntot = sum(counts)
+    allocate (a(ntot, ntot), e(n), pe(n), fpe(n), y(n))
+    do j = 1, ntot
+      e = 0
+      if (j > off .and. j <= off + n) e(j - off) = 1
+      call op%project(e, pe)
+      call op%apply_f(pe, fpe)
+      call op%project(fpe, y)
+      call MPI_Allgatherv(y, n, MPI_REAL_DP, a(:, j), counts, displs, MPI_REAL_DP, op%comm(), ierr)
+    end do
+    a = (a + transpose(a))/2
+    allocate (w(ntot), work(3*ntot))
+    call dsyev('N', 'U', ntot, a, ntot, w, work, size(work), info)
+    if (info /= 0) error stop 'dense_pfp_condition: dsyev failed'
+    cond = w(ntot)/minval(w, mask=w > 1.0e-8_dp*w(ntot))
+  end function dense_pfp_condition
 
   !> cond(G G^T) = lambda_max(G G^T) lambda_max((G G^T)^{-1}), each by 30
   !> power iterations (G G^T applied as G (G^T z), the inverse by the coarse
