@@ -11,10 +11,49 @@
 #    same tag, FETICONTACT_PFUNIT_URL.
 # 3. When neither works (offline, no archive, a failed build), the configure
 #    goes on with a warning and every pFUnit test is registered as a test that
-#    reports itself SKIPPED with the reason (CTest "Not Run"), never passed.
+#    reports itself SKIPPED with the reason (CTest "Not Run"), never passed;
+#    so are the tests that check what a pFUnit test writes (tests/io).
+#    Unless pFUnit is required: FETICONTACT_REQUIRE_PFUNIT=ON (CMake or
+#    environment variable), which is the default in CI (environment CI=true):
+#    then the configure, and so tools/test.sh, fails with the reason.
 set(FETICONTACT_PFUNIT_VERSION 4.14.0)
 set(FETICONTACT_PFUNIT_AVAILABLE OFF)
 set(FETICONTACT_PFUNIT_MISSING "")
+
+# Required (a failure to find or build it fails the configure) in CI or when asked: the CMake
+# option FETICONTACT_REQUIRE_PFUNIT, or the environment variable of that name (a true value), or
+# the environment variable CI (true, 1, yes, on). The environment is read at every configure and
+# never stored in the cache, so a build folder configured once in CI or with the variable does
+# not keep requiring pFUnit later.
+option(FETICONTACT_REQUIRE_PFUNIT "Fail the configure when pFUnit can be neither found nor built" OFF)
+set(_fc_pf_true "^([Tt][Rr][Uu][Ee]|1|[Yy][Ee][Ss]|[Oo][Nn])$")
+set(_fc_pf_required ${FETICONTACT_REQUIRE_PFUNIT})
+set(_fc_pf_ci_note "")
+if("$ENV{FETICONTACT_REQUIRE_PFUNIT}" MATCHES "${_fc_pf_true}")
+  set(_fc_pf_required ON)
+  set(_fc_pf_ci_note ", from the environment")
+elseif("$ENV{CI}" MATCHES "${_fc_pf_true}")
+  set(_fc_pf_required ON)
+  set(_fc_pf_ci_note ", the default with CI=$ENV{CI}")
+endif()
+
+# pFUnit could not be had: the tests that need it skip, unless it is required.
+macro(_fc_pf_unavailable reason)
+  # the reason goes into the skip message of every pFUnit test (a `sh -c '...'` command): no quotes,
+  # no list separators
+  set(FETICONTACT_PFUNIT_MISSING "${reason}")
+  string(REGEX REPLACE "[\"';`$\\]" " " FETICONTACT_PFUNIT_MISSING "${FETICONTACT_PFUNIT_MISSING}")
+  if(_fc_pf_required)
+    message(FATAL_ERROR "pFUnit: ${reason}; pFUnit is required (FETICONTACT_REQUIRE_PFUNIT=ON"
+      "${_fc_pf_ci_note}): the pFUnit tests cannot run. Install pFUnit ${FETICONTACT_PFUNIT_VERSION} "
+      "(-DCMAKE_PREFIX_PATH=<its prefix>), put its archive in ../shared/third_party, or set "
+      "FETICONTACT_PFUNIT_URL.")
+  endif()
+  message(WARNING "pFUnit: ${reason}; the pFUnit tests and the tests that read their files will report "
+    "themselves skipped. Install pFUnit ${FETICONTACT_PFUNIT_VERSION} and pass "
+    "-DCMAKE_PREFIX_PATH=<its prefix>, or set FETICONTACT_PFUNIT_URL (FETICONTACT_REQUIRE_PFUNIT=ON makes "
+    "this an error, as in CI).")
+endmacro()
 
 # feticontact_add_pfunit_test(<name> SOURCES <x.pf>... [LIBS <targets>] MAX_PES <n>
 #                             [LABELS <labels>] [TIMEOUT <s>] [DEFINITIONS <defs>])
@@ -52,6 +91,9 @@ endfunction()
 set(FETICONTACT_PFUNIT_URL
     "https://github.com/Goddard-Fortran-Ecosystem/pFUnit/releases/download/v${FETICONTACT_PFUNIT_VERSION}/pFUnit-v${FETICONTACT_PFUNIT_VERSION}.tar"
     CACHE STRING "Upstream pFUnit release archive, downloaded when neither an installed pFUnit nor the local archive is found")
+if(DEFINED ENV{FETICONTACT_PFUNIT_URL})
+  set(FETICONTACT_PFUNIT_URL "$ENV{FETICONTACT_PFUNIT_URL}" CACHE STRING "" FORCE)   # the environment wins
+endif()
 
 # The cache folder: one per compiler (id, version, path) and MPI compiler wrapper,
 # since Fortran module files are compiler-specific.
@@ -106,10 +148,7 @@ else()
       if(NOT _fc_pf_dl_code EQUAL 0)
         file(REMOVE "${_fc_pf_archive}.part")
         file(LOCK "${_fc_pf_root}/.lock" RELEASE)
-        set(FETICONTACT_PFUNIT_MISSING "download of ${FETICONTACT_PFUNIT_URL} failed")
-        message(WARNING "pFUnit: download of ${FETICONTACT_PFUNIT_URL} failed (${_fc_pf_dl}); the pFUnit tests "
-          "will report themselves skipped. Install pFUnit ${FETICONTACT_PFUNIT_VERSION} and pass "
-          "-DCMAKE_PREFIX_PATH=<its prefix>, or set FETICONTACT_PFUNIT_URL.")
+        _fc_pf_unavailable("download of ${FETICONTACT_PFUNIT_URL} failed (${_fc_pf_dl})")
         return()
       endif()
       file(RENAME "${_fc_pf_archive}.part" "${_fc_pf_archive}")
@@ -146,9 +185,7 @@ else()
     file(APPEND "${_fc_pf_log}" "== ${_fc_pf_step}\n${_fc_pf_out}\n")
     if(NOT _fc_pf_rc EQUAL 0)
       file(LOCK "${_fc_pf_root}/.lock" RELEASE)
-      set(FETICONTACT_PFUNIT_MISSING "its ${_fc_pf_step} failed, see ${_fc_pf_log}")
-      message(WARNING "pFUnit: ${_fc_pf_step} failed (${_fc_pf_rc}); see ${_fc_pf_log}. The pFUnit tests will "
-        "report themselves skipped.")
+      _fc_pf_unavailable("its ${_fc_pf_step} failed (${_fc_pf_rc}), see ${_fc_pf_log}")
       return()
     endif()
   endforeach()

@@ -13,6 +13,7 @@ that tools/plots.py makes its figures from that CSV. Exit 0 when all pass.
 import argparse
 import csv
 import os
+import shutil
 import subprocess
 import sys
 
@@ -34,6 +35,8 @@ def main():
     ap.add_argument("--mpiexec", required=True)
     ap.add_argument("--workdir", required=True)
     args = ap.parse_args()
+    shutil.rmtree(args.workdir, ignore_errors=True)   # no stale outputs of an earlier run
+    os.makedirs(args.workdir)
     out = os.path.join(args.workdir, "campaign")
     cmd = [sys.executable, os.path.join(TOOLS, "campaign.py"), "--program", args.program, "--mpiexec", args.mpiexec,
            "--ranks", "1", "--reps", "1", "--timeout", "60", "--out", out,

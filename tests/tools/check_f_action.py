@@ -7,6 +7,7 @@ table's rounding of the ratio), and both converge with either f_action. The tabl
 """
 import argparse
 import os
+import shutil
 import re
 import subprocess
 import sys
@@ -16,6 +17,8 @@ ap.add_argument("--program", required=True)
 ap.add_argument("--mpiexec", default="mpiexec")
 ap.add_argument("--workdir", required=True)
 args = ap.parse_args()
+shutil.rmtree(args.workdir, ignore_errors=True)   # no stale outputs of an earlier run
+os.makedirs(args.workdir)
 root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 base = os.path.join(root, "inputs", "hard", "distortion_02.nml")
 cases = ["short=%s@mesh:nsub=2,2,2@mesh:nel=6,6,6" % base,
