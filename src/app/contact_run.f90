@@ -90,8 +90,8 @@ contains
       call log_message('feticontact: the dual solver did not converge: '//trim(solver%message))
       status = exit_not_converged
     else if (sol%kkt%worst() > p%reconstruction%kkt_tol) then
-      write (line, '(a,es10.3,a,es10.3)') 'feticontact: KKT check failed: largest residual ', sol%kkt%worst(), &
-        ' > kkt_tol ', p%reconstruction%kkt_tol
+      write (line, '(3a,es10.3,a,es10.3)') 'feticontact: KKT check failed: largest residual (', sol%kkt%worst_name(), &
+        ') ', sol%kkt%worst(), ' > kkt_tol ', p%reconstruction%kkt_tol
       call log_message(line)
       status = exit_kkt_failed
     else

@@ -39,6 +39,7 @@ module kkt
     real(dp) :: equality = 0, feasibility = 0   !< max(gluing, dirichlet) and penetration
   contains
     procedure :: worst
+    procedure :: worst_name
   end type kkt_residuals_t
 
 contains
@@ -49,6 +50,17 @@ contains
     worst = max(this%equilibrium, this%gluing, this%dirichlet, this%penetration, this%dual_feasibility, &
                 this%complementarity)
   end function worst
+
+  !> The name of the largest residual (as the log's KKT line writes it).
+  function worst_name(this) result(name)
+    class(kkt_residuals_t), intent(in) :: this
+    character(len=:), allocatable :: name
+    real(dp) :: v(6)
+    character(len=24), parameter :: names(6) = [character(len=24) :: 'equilibrium', 'gluing jump', 'Dirichlet', &
+                                                 'penetration', 'dual feasibility', 'complementarity']
+    v = [this%equilibrium, this%gluing, this%dirichlet, this%penetration, this%dual_feasibility, this%complementarity]
+    name = trim(names(maxloc(v, 1)))
+  end function worst_name
 
   !> Residuals of (u, lambda). Collective.
   function check_kkt(op, u, lambda) result(res)
