@@ -70,19 +70,12 @@ contains
     call memory_mark('output')
     call timer_stop('total')
     write (line, '(a,es12.5,a,es12.5,a,i0,a,es12.5)') 'contact force ', contact%total_force, &
-      ', max pressure ', contact%max_pressure, ', active nodes ', contact%active_nodes, &
+      ', max pressure ', contact%max_pressure, ', nodes in contact ', contact%active_nodes, &
       ', contact radius ', contact%contact_radius
     call log_message(line)
     call timers_reduce(comm, stats)
     call log_section('Timings [s] (min / max / mean over ranks)')
     call print_timing_table(stats)
-    call log_message("('F action' and 'coarse solve' are parts of the phases that use them: dual setup, solve, "// &
-                     "reconstruction)")
-    if (op%f_explicit() .and. op%f_explicit_after() >= 0) then
-      write (line, '(a,i0,a)') "('explicit F' was built after ", op%f_explicit_after(), &
-        " F actions (f_action = 'auto'): part of the phase running then, dual setup or solve)"
-      call log_message(trim(line))
-    end if
     if (p%output%write_report) call write_run_report(p, dual, solver, sol, contact, stats, seconds)
 
     status = 0
