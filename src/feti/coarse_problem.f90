@@ -32,15 +32,14 @@
 !> MPI_Allgatherv and a local MUMPS solve), c = P the old 'distributed' one
 !> (one factorization on all ranks; a solve gathers to rank 0 and scatters).
 !>
-!> Dense factor (&solver coarse_factor, issue 14, session 15): on a group of
+!> Dense factor (&solver coarse_factor): on a group of
 !> one rank the whole G G^T may instead be factorized by LAPACK's dense
 !> Cholesky (dpotrf; solves by dpotrs). For small coarse problems (a few
 !> hundred rows) MUMPS's fixed cost per call dominates its solves (its
 !> driver recomputes the size of a saved instance, duplicates and frees
 !> communicators, gathers and scatters the right-hand side on every call)
 !> while the dense factor of n = 384 rows is 1.2 MB; 'auto' takes the dense
-!> factor up to coarse_dense_max rows (measured in docs/RESULTS.md "Dense
-!> coarse factor").
+!> factor up to coarse_dense_max rows (docs/TUNING.md, "The coarse problem").
 module coarse_problem
   use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_IP
   use decomposition, only: decomposition_t, subdomain_graph
@@ -76,7 +75,7 @@ module coarse_problem
   end type coarse_options_t
 
   !> coarse_factor = 'auto': the dense Cholesky factor on one-rank groups up
-  !> to this coarse dimension (docs/RESULTS.md "Dense coarse factor")
+  !> to this coarse dimension (docs/TUNING.md, "The coarse problem")
   integer(ip), parameter, public :: coarse_dense_max = 500
 
   !> Automatic ranks per group: the estimated factor of G G^T divided among
@@ -87,10 +86,7 @@ module coarse_problem
   !> Above this estimated factor size the automatic group takes at least the
   !> ranks that share a node: every rank of a redundant group streams the
   !> whole factor in each solve, so ranks of one node compete for its memory
-  !> bandwidth. Measured on 2 ranks of one node (docs/RESULTS.md "Coarse
-  !> groups and the node's memory bandwidth"): one group of 2 ranks solves
-  !> 1.7x faster at 4096 subdomains (estimate 210 MB) and 1.4x at 512 (13
-  !> MB), 1.6x slower at 64 (0.8 MB); the threshold lies between.
+  !> bandwidth (docs/TUNING.md, "The coarse problem").
   integer(i8), parameter, public :: coarse_node_share_bytes = 4194304_i8
 
   !> Where the coarse blocks of every subdomain live.
@@ -532,8 +528,7 @@ contains
     ! 2. g_r g_r^T of every owned row into 6x6 blocks. The hash is sized by the blocks, not by the
     ! rows: a subdomain has at most 26 neighbours, so about 14 upper blocks (its diagonal one and
     ! one per neighbour pair), plus the pairs with other ranks' subdomains that its owned rows
-    ! give; the hash grows if that is too few. (Sized by the rows, n_own/4, it was 18x the blocks
-    ! at 4096 subdomains: 150 MB zeroed per assembly; docs/RESULTS.md "Coarse assembly".)
+    ! give; the hash grows if that is too few.
     call blocks%init(max(64_ip, 16*this%layout%nlocal))
     do i = 1, con%n_own
       keep = .true.
@@ -646,10 +641,8 @@ contains
   !> sums them at the row's owner, and the blocks that are not zero are kept
   !> (at most 8 copies of a node; a gluing row touches 2). G does not change
   !> during a run, so every later coarse assembly (the faces of the polish,
-  !> the standard reconstruction) reads them instead of summing again
-  !> (issue 14, session 13: the 48 x rows arrays of that sum, zeroed anew at
-  !> every assembly, were a quarter of a 4096-subdomain run's time in page
-  !> faults). Collective the first time.
+  !> the standard reconstruction) reads them instead of summing again.
+  !> Collective the first time.
   subroutine ensure_row_blocks(con)
     type(constraints_t), intent(inout) :: con
     real(dp), allocatable :: slots_local(:, :), slots_own(:, :)
@@ -1003,8 +996,8 @@ contains
   !> Estimated bytes of the MUMPS factors of G G^T for `nsub` subdomains
   !> (one group's factorization, in all): nested dissection of an n^3 grid of
   !> 6x6 blocks gives O(nsub^(4/3)) factor entries. The constant is fitted to
-  !> the measured box cubes (docs/RESULTS.md, "Coarse problem on rank
-  !> groups"): 8 bytes per entry.
+  !> the measured box cubes (docs/TUNING.md, "The coarse problem"): 8 bytes
+  !> per entry.
   pure integer(i8) function estimated_factor_bytes(nsub)
     integer(ip), intent(in) :: nsub
     real(dp), parameter :: entries_per_nsub43 = 400.0_dp
