@@ -61,7 +61,7 @@ module coarse_problem
   private
 
   public :: coarse_layout_t, build_coarse_layout, ensure_row_blocks, row_blocks
-  public :: dense_for
+  public :: dense_for, gathered_counts
   public :: coarse_options_t, group_starts, choose_coarse_ranks, estimated_factor_bytes, ranks_per_node
 
   !> How the coarse problem is factorized (&solver coarse_ranks, coarse_blr,
@@ -324,6 +324,22 @@ contains
     call timer_stop('coarse: factorization')
   end subroutine take_schur
 
+  !> Every rank's count n (counts) and their exclusive prefix sums (displs),
+  !> as MPI_Allgatherv takes them. Collective.
+  subroutine gathered_counts(n, comm, counts, displs)
+    integer, intent(in) :: n
+    type(MPI_Comm), intent(in) :: comm
+    integer, allocatable, intent(out) :: counts(:), displs(:)
+    integer :: nranks, ierr, r
+    call MPI_Comm_size(comm, nranks, ierr)
+    allocate (counts(nranks), displs(nranks))
+    call MPI_Allgather(n, 1, MPI_INTEGER, counts, 1, MPI_INTEGER, comm, ierr)
+    displs(1) = 0
+    do r = 2, nranks
+      displs(r) = displs(r - 1) + counts(r - 1)
+    end do
+  end subroutine gathered_counts
+
   !> This rank's subdomains with a Schur rotation (local index, position).
   subroutine local_rotations(this, dec)
     class(coarse_problem_t), intent(inout) :: this
@@ -385,20 +401,14 @@ contains
     integer(ip), allocatable :: all_pos(:)
     real(dp), allocatable :: all_g(:, :)
     integer, allocatable :: counts(:), displs(:)
-    integer :: nranks, ierr, r, nmine, total
+    integer :: ierr, nmine, total
     real(dp) :: t0
     if (parent%schur%m == 0) call fatal_error('coarse_problem: make_view of an instance without Schur rows')
     call this%free()
     this%view_of => parent
     call timer_start('coarse: assembly')
-    call MPI_Comm_size(parent%comm, nranks, ierr)
-    allocate (counts(nranks), displs(nranks))
     nmine = size(keys)
-    call MPI_Allgather(nmine, 1, MPI_INTEGER, counts, 1, MPI_INTEGER, parent%comm, ierr)
-    displs(1) = 0
-    do r = 2, nranks
-      displs(r) = displs(r - 1) + counts(r - 1)
-    end do
+    call gathered_counts(nmine, parent%comm, counts, displs)
     total = sum(counts)
     allocate (all_keys(total), all_pos(total), all_g(6, total))
     call MPI_Allgatherv(keys, nmine, MPI_INTEGER8, all_keys, counts, displs, MPI_INTEGER8, parent%comm, ierr)

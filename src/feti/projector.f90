@@ -9,7 +9,7 @@ module projector
   use decomposition, only: decomposition_t
   use constraints, only: constraints_t, row_contact
   use coarse_problem, only: coarse_problem_t, coarse_layout_t, build_coarse_layout, coarse_options_t, &
-                            choose_coarse_ranks, ranks_per_node, dense_for
+                            choose_coarse_ranks, ranks_per_node, dense_for, gathered_counts
   use sorting, only: sort_permutation
   use params, only: solver_params_t
   use errors, only: collective_error, exit_input_error
@@ -279,16 +279,10 @@ contains
       integer(i8), intent(in) :: mine(:)
       integer(ip), intent(in) :: k
       integer(i8) :: all(k)
-      integer :: nranks, r, n_mine
+      integer :: n_mine
       integer, allocatable :: counts(:), displs(:)
-      call MPI_Comm_size(this%comm, nranks, ierr)
-      allocate (counts(nranks), displs(nranks))
       n_mine = size(mine)
-      call MPI_Allgather(n_mine, 1, MPI_INTEGER, counts, 1, MPI_INTEGER, this%comm, ierr)
-      displs(1) = 0
-      do r = 2, nranks
-        displs(r) = displs(r - 1) + counts(r - 1)
-      end do
+      call gathered_counts(n_mine, this%comm, counts, displs)
       call MPI_Allgatherv(mine, n_mine, MPI_INTEGER8, all, counts, displs, MPI_INTEGER8, this%comm, ierr)
     end function gather_keys
   end function masked_coarse
@@ -312,7 +306,7 @@ contains
     real(dp) :: gs(6, 6)
     integer(ip) :: ls, e, n_mine, n, k
     integer, allocatable :: counts(:), displs(:)
-    integer :: nranks, ierr, r, cnt
+    integer :: ierr, cnt
     logical :: touched
     allocate (positions(0), gram(6, 6, 0))
     if (.not. regular_base .or. con%n_contact_global == 0) return
@@ -340,14 +334,8 @@ contains
         my_gram(:, :, n_mine) = gs
       end if
     end do
-    call MPI_Comm_size(this%comm, nranks, ierr)
-    allocate (counts(nranks), displs(nranks))
     cnt = int(n_mine)
-    call MPI_Allgather(cnt, 1, MPI_INTEGER, counts, 1, MPI_INTEGER, this%comm, ierr)
-    displs(1) = 0
-    do r = 2, nranks
-      displs(r) = displs(r - 1) + counts(r - 1)
-    end do
+    call gathered_counts(cnt, this%comm, counts, displs)
     n = sum(counts)
     if (4*n > this%layout%nsub) return
     deallocate (positions, gram)
