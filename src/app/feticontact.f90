@@ -10,7 +10,7 @@ program feticontact
   use kinds, only: path_len
   use errors, only: collective_error, exit_input_error, exit_process
   use logger, only: logger_init, log_section, log_message, log_is_root
-  use params, only: params_t, read_params, echo_params
+  use params, only: params_t, read_params, echo_params, input_warnings
   use contact_run, only: run_contact_case
   use blas_threads, only: blas_threads_setup, blas_log_line
   use memory_marks, only: memory_mark
@@ -21,6 +21,7 @@ program feticontact
   character(len=path_len) :: arg, file
   character(len=300) :: line
   logical :: check_only
+  character(len=1024), allocatable :: warnings(:)
   integer :: i, ierr, nranks, status
   logical :: halting(size(ieee_usual))
 
@@ -68,6 +69,10 @@ program feticontact
     call log_message(line)
   end if
   call log_message(blas_log_line())
+  warnings = input_warnings(p)
+  do i = 1, size(warnings)
+    call log_message('feticontact: WARNING: '//trim(warnings(i)))
+  end do
 
   if (.not. check_only) call run_contact_case(p, MPI_COMM_WORLD, status)
   if (check_only) call log_message('input checked: OK')

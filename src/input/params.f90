@@ -18,7 +18,7 @@ module params
   implicit none
   private
 
-  public :: read_params, check_params, echo_params, default_params, param_items, group_names
+  public :: read_params, check_params, echo_params, input_warnings, default_params, param_items, group_names
   public :: auto_cluster, resolve_cluster, local_ordering_for, local_solver_for
 
   !> local_ordering = 'auto': MUMPS's AMD up to this many dofs in the largest subdomain, METIS above
@@ -193,8 +193,8 @@ contains
         return
       end if
       seen(i) = .true.
-      call check_assignments(name, group_text, p, status, msg)
-      if (status == 0) call read_group_checked(name, group_text, p, status, msg)
+      call read_group_checked(name, group_text, p, status, msg)
+      if (status == 0) call check_assignments(name, group_text, p, status, msg)
       if (status /= 0) then
         msg = 'file '//trim(file)//', group &'//name//': '//trim(msg)
         return
@@ -884,6 +884,24 @@ contains
             ' (got '//trim(got)//')'
     end subroutine fail
   end subroutine check_params
+
+  !> Settings that are valid but probably not what was meant: each a sentence
+  !> naming the group and the variable (the log and report.json's `warnings`).
+  function input_warnings(p) result(w)
+    type(params_t), intent(in) :: p
+    character(len=msg_len), allocatable :: w(:)
+    character(len=msg_len) :: line
+    allocate (w(0))
+    associate (o => p%obstacle, b => p%boundary)
+      ! the face z = 0 moves down by at most -uz of the prescribed top (the body only shortens)
+      if (o%shape /= 'none' .and. b%top_dirichlet .and. o%gap > -b%top_displacement(3)) then
+        write (line, '(a,es10.3,a,es10.3,a)') '&obstacle gap = ', o%gap, &
+          ' is larger than what &boundary top_displacement(3) = ', b%top_displacement(3), &
+          ' can close: the body never touches the obstacle (no contact)'
+        w = [w, line]
+      end if
+    end associate
+  end function input_warnings
 
   !> The ordering of the subdomain factorizations that `&solver local_ordering`
   !> asks for, when the largest subdomain (or cluster) of the run has
