@@ -2,6 +2,7 @@
 !>
 !> Usage: mpirun -n P feticontact [--check] input.nml
 !>   --check  read and check the input, echo the settings, and exit.
+!>        feticontact --version: the version and the git commit of the build.
 !> Environment: FETICONTACT_BLAS_THREADS = BLAS threads per rank (default 1;
 !> see blas_threads and docs/INPUT.md).
 program feticontact
@@ -9,8 +10,9 @@ program feticontact
   use, intrinsic :: ieee_exceptions, only: ieee_get_halting_mode, ieee_set_halting_mode, ieee_set_flag, ieee_usual
   use kinds, only: path_len
   use errors, only: collective_error, exit_input_error, exit_process
+  use build_info, only: fc_version, fc_commit
   use logger, only: logger_init, log_section, log_message, log_is_root
-  use params, only: params_t, read_params, echo_params
+  use params, only: params_t, read_params, echo_params, input_warnings
   use contact_run, only: run_contact_case
   use blas_threads, only: blas_threads_setup, blas_log_line
   use memory_marks, only: memory_mark
@@ -21,6 +23,7 @@ program feticontact
   character(len=path_len) :: arg, file
   character(len=300) :: line
   logical :: check_only
+  character(len=1024), allocatable :: warnings(:)
   integer :: i, ierr, nranks, status
   logical :: halting(size(ieee_usual))
 
@@ -47,8 +50,12 @@ program feticontact
     select case (arg)
     case ('--check')
       check_only = .true.
+    case ('--version')
+      call log_message('feticontact '//fc_version//' (commit '//fc_commit//')')
+      call MPI_Finalize(ierr)
+      call exit_process(0)
     case ('-h', '--help')
-      call log_message('usage: mpirun -n P feticontact [--check] input.nml')
+      call log_message('usage: mpirun -n P feticontact [--check] input.nml; feticontact --version')
       call MPI_Finalize(ierr)
       call exit_process(0)
     case default
@@ -60,6 +67,7 @@ program feticontact
   if (len_trim(file) == 0) call collective_error('no input file given; usage: '// &
     'mpirun -n P feticontact [--check] input.nml', MPI_COMM_WORLD, exit_input_error)
 
+  call log_message('feticontact '//fc_version//' (commit '//fc_commit//')')
   call read_params(file, MPI_COMM_WORLD, p)
   call log_section('feticontact: settings used')
   if (log_is_root()) call echo_params(p, output_unit)
@@ -68,6 +76,10 @@ program feticontact
     call log_message(line)
   end if
   call log_message(blas_log_line())
+  warnings = input_warnings(p)
+  do i = 1, size(warnings)
+    call log_message('feticontact: WARNING: '//trim(warnings(i)))
+  end do
 
   if (.not. check_only) call run_contact_case(p, MPI_COMM_WORLD, status)
   if (check_only) call log_message('input checked: OK')

@@ -18,7 +18,7 @@ module params
   implicit none
   private
 
-  public :: read_params, check_params, echo_params, default_params, param_items, group_names
+  public :: read_params, check_params, echo_params, input_warnings, default_params, param_items, group_names
   public :: auto_cluster, resolve_cluster, local_ordering_for, local_solver_for
 
   !> local_ordering = 'auto': MUMPS's AMD up to this many dofs in the largest subdomain, METIS above
@@ -27,6 +27,8 @@ module params
   integer(i8), parameter, public :: dense_max_dofs = 500
 
   integer, parameter :: msg_len = 1024
+  !> &obstacle gap: the deepest initial penetration accepted, as a fraction of the body's height
+  real(dp), parameter, public :: max_penetration = 0.1_dp
 
   type, public :: boundary_params_t
     logical :: top_dirichlet = .true.         !< prescribe u on z = Lz
@@ -192,6 +194,7 @@ contains
       end if
       seen(i) = .true.
       call read_group_checked(name, group_text, p, status, msg)
+      if (status == 0) call check_assignments(name, group_text, p, status, msg)
       if (status /= 0) then
         msg = 'file '//trim(file)//', group &'//name//': '//trim(msg)
         return
@@ -332,6 +335,101 @@ contains
     status = 1
     msg = 'group &'//name//' is not closed with "/"'
   end subroutine next_group
+
+  !> Refuse what a namelist read would accept silently: a variable given twice
+  !> in the group, and an array variable given with fewer values than it has
+  !> components (an element assignment 'name(i) = v' sets that element only).
+  subroutine check_assignments(name, group_text, p, status, msg)
+    character(len=*), intent(in) :: name, group_text
+    type(params_t), intent(in) :: p
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    type(param_item_t), allocatable :: items(:)
+    character(len=:), allocatable :: body, piece, lhs
+    character(len=name_len), allocatable :: given(:)
+    integer, allocatable :: starts(:)
+    integer :: k, i, j, nstarts, body_start, nvalues
+
+    status = 0
+    msg = ''
+    body_start = index(group_text, ' ')
+    if (body_start == 0) return
+    body = group_text(body_start:len(group_text) - 1)
+    if (index(body, '=') == 0) return
+    call param_items(p, name, items)
+    call assignment_starts(body, starts, nstarts)
+    allocate (given(nstarts))
+    given = ''
+    do k = 1, nstarts
+      if (k < nstarts) then
+        piece = body(starts(k):starts(k + 1) - 1)
+      else
+        piece = body(starts(k):)
+      end if
+      i = index(piece, '=')
+      if (i == 0) cycle
+      lhs = lower(trim(adjustl(piece(1:i - 1))))
+      lhs = lhs(1:len_trim(lhs))
+      j = index(lhs, ' ')
+      do while (j > 0)          ! 'nsub (1)' and 'nsub(1)' are the same
+        lhs = lhs(1:j - 1)//lhs(j + 1:)
+        j = index(lhs, ' ')
+      end do
+      if (any(given(1:k - 1) == lhs)) then
+        status = 1
+        msg = 'variable '//lhs//': given twice in the group (each variable at most once)'
+        return
+      end if
+      given(k) = lhs
+      if (index(lhs, '(') > 0) cycle
+      do j = 1, size(items)
+        if (items(j)%name /= lhs .or. items(j)%n <= 1) cycle
+        nvalues = count_values(piece(i + 1:))
+        if (nvalues < items(j)%n) then
+          status = 1
+          write (msg, '(a,i0,a,i0,a)') 'variable '//lhs//': needs all ', items(j)%n, &
+            ' components (got ', nvalues, ' in "'//trim(adjustl(piece))//'")'
+          return
+        end if
+      end do
+    end do
+  contains
+    !> The number of values in a namelist value list ('r*c' counts r).
+    integer function count_values(t) result(n)
+      character(len=*), intent(in) :: t
+      integer :: c, star, r, ios, start
+      character :: quote
+      n = 0
+      quote = ' '
+      start = 0
+      do c = 1, len(t) + 1
+        if (c <= len(t)) then
+          if (quote /= ' ') then
+            if (t(c:c) == quote) quote = ' '
+            cycle
+          end if
+          if (t(c:c) == '"' .or. t(c:c) == "'") then
+            quote = t(c:c)
+            if (start == 0) start = c
+            cycle
+          end if
+          if (t(c:c) /= ',' .and. t(c:c) /= ' ') then
+            if (start == 0) start = c
+            cycle
+          end if
+        end if
+        if (start == 0) cycle
+        star = index(t(start:c - 1), '*')
+        r = 1
+        if (star > 1) then
+          read (t(start:start + star - 2), *, iostat=ios) r
+          if (ios /= 0) r = 1
+        end if
+        n = n + r
+        start = 0
+      end do
+    end function count_values
+  end subroutine check_assignments
 
   !> Read one group; on failure find the assignment at fault.
   subroutine read_group_checked(name, group_text, p, status, msg)
@@ -705,10 +803,17 @@ contains
                   'symmetry_x0 and symmetry_y0 together with an &obstacle shape (the frictionless '// &
                   'contact holds only the z direction)', 'F')
     end associate
+    if (p%load%top_pressure /= 0 .and. p%boundary%top_dirichlet) &
+      call fail('load', 'top_pressure', 'has no effect with &boundary top_dirichlet = .true. (the prescribed '// &
+                'displacement holds the top face): set top_dirichlet = .false. or drop top_pressure', &
+                reals([p%load%top_pressure])//', top_dirichlet = T')
     associate (o => p%obstacle)
       if (.not. one_of(o%shape, [character(len=8) :: 'sphere', 'plane', 'none'])) &
         call fail('obstacle', 'shape', "must be 'sphere', 'plane' or 'none'", o%shape)
       if (o%radius <= 0) call fail('obstacle', 'radius', 'must be > 0', reals([o%radius]))
+      if (o%shape /= 'none' .and. o%gap < -max_penetration*p%mesh%lengths(3)) &
+        call fail('obstacle', 'gap', 'the obstacle must not start deeper inside the body than 0.1 times '// &
+                  'its height &mesh lengths(3)', reals([o%gap]))
     end associate
     associate (s => p%solver)
       call s%smalbe%check(variable, rule, got)
@@ -779,6 +884,24 @@ contains
             ' (got '//trim(got)//')'
     end subroutine fail
   end subroutine check_params
+
+  !> Settings that are valid but probably not what was meant: each a sentence
+  !> naming the group and the variable (the log and report.json's `warnings`).
+  function input_warnings(p) result(w)
+    type(params_t), intent(in) :: p
+    character(len=msg_len), allocatable :: w(:)
+    character(len=msg_len) :: line
+    allocate (w(0))
+    associate (o => p%obstacle, b => p%boundary)
+      ! the face z = 0 moves down by at most -uz of the prescribed top (the body only shortens)
+      if (o%shape /= 'none' .and. b%top_dirichlet .and. o%gap > -b%top_displacement(3)) then
+        write (line, '(a,es10.3,a,es10.3,a)') '&obstacle gap = ', o%gap, &
+          ' is larger than what &boundary top_displacement(3) = ', b%top_displacement(3), &
+          ' can close: the body never touches the obstacle (no contact)'
+        w = [w, line]
+      end if
+    end associate
+  end function input_warnings
 
   !> The ordering of the subdomain factorizations that `&solver local_ordering`
   !> asks for, when the largest subdomain (or cluster) of the run has

@@ -2,6 +2,7 @@
 !> each phase (printed, and as JSON) and the peak memory of the ranks.
 module report
   use kinds, only: dp, i8, name_len, MPI_INT_I8
+  use build_info, only: fc_version, fc_commit
   use memory_marks, only: memory_mark_count, memory_mark_get
   use proc_status, only: proc_status_bytes
   use timers, only: timer_stat_t, row_phase, row_tree, row_other, row_memory
@@ -332,6 +333,8 @@ contains
     type(param_item_t), allocatable :: items(:)
     integer :: g, k
     call w%begin_object()
+    call w%add('version', fc_version)
+    call w%add('commit', fc_commit)
     call w%add('file', trim(p%file))
     do g = 1, size(group_names)
       call param_items(p, trim(group_names(g)), items)

@@ -6,7 +6,7 @@ module run_report
   use kinds, only: dp, ip, i8, MPI_INT_I8, MPI_REAL_DP
   use timers, only: timer_stat_t
   use logger, only: log_message
-  use params, only: params_t, param_item_t, param_items, default_params
+  use params, only: params_t, param_item_t, param_items, default_params, input_warnings
   use feti_operators, only: feti_t, feti_sizes_t
   use coarse_problem, only: coarse_problem_t
   use smalbe, only: smalbe_t
@@ -42,7 +42,8 @@ contains
     integer(i8) :: f_bytes
     real(dp) :: f_seconds, flops(2), f_flops, switch_estimate
     integer :: switch_at
-    integer :: nranks, ierr
+    integer :: nranks, ierr, k
+    character(len=1024), allocatable :: warnings(:)
 
     op => dual%operators()
     n = op%sizes()
@@ -56,6 +57,12 @@ contains
 
     call js%begin_object()
     call js%add_raw('case', params_json(p))
+    warnings = input_warnings(p)
+    call js%begin_array('warnings')
+    do k = 1, size(warnings)
+      call js%append(trim(warnings(k)))
+    end do
+    call js%end_array()
     call js%begin_object('sizes')
     call js%add_each([character(len=16) :: 'subdomains', 'ranks', 'primal_dofs', 'dual_dofs', 'coarse_dim', &
                       'contact_rows', 'active_contact', 'gluing_rows', 'dirichlet_rows'], &
