@@ -898,7 +898,7 @@ contains
         write (line, '(a,es10.3,a,es10.3,a)') '&obstacle gap = ', o%gap, &
           ' is larger than what &boundary top_displacement(3) = ', b%top_displacement(3), &
           ' can close: the body never touches the obstacle (no contact)'
-        w = [w, line]
+        w = [character(len=msg_len) :: w, line]
       end if
     end associate
   end function input_warnings
