@@ -136,7 +136,7 @@ def main():
     ap.add_argument('bin_b')
     ap.add_argument('inputs', nargs='+')
     ap.add_argument('--ranks', type=int, default=2)
-    ap.add_argument('--work', default='/tmp/compare_runs')
+    ap.add_argument('--work', default='compare_runs', help='folder for the runs (default: ./compare_runs)')
     args = ap.parse_args()
     bad = 0
     for nml in args.inputs:
