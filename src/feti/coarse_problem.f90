@@ -144,6 +144,7 @@ module coarse_problem
     real(dp), allocatable :: red(:)         !< host: the reduced right-hand side
     !> (2, k): local subdomain and coarse position of this rank's rotated subdomains
     integer(ip), allocatable :: rotated(:, :)
+    real(dp), allocatable :: rotated_b(:)   !< work of a Schur solve: the right-hand side, rotated
     !> a face view (make_view): solves with the factors of view_of and its own sfac
     type(coarse_problem_t), pointer :: view_of => null()
   contains
@@ -354,6 +355,7 @@ contains
       this%rotated(:, k) = [ls, pos]
     end do
     this%rotated = this%rotated(:, 1:k)
+    allocate (this%rotated_b(6*size(dec%local_subdomains)))
   end subroutine local_rotations
 
   !> Move the pivot positions of `vars` (global rows, ascending) to the end
@@ -442,15 +444,14 @@ contains
     type(schur_factor_t), intent(in) :: fac
     real(dp), intent(in) :: b(:)
     real(dp), intent(out) :: x(:)
-    real(dp), allocatable :: bt(:)
     integer(ip) :: k
-    bt = b
+    this%rotated_b(:) = b(1:size(this%rotated_b))
     do k = 1, size(this%rotated, 2, kind=ip)
       associate (ls => this%rotated(1, k))
-        call this%schur%rotate(this%rotated(2, k), bt(6*ls - 5:6*ls), .true.)
+        call this%schur%rotate(this%rotated(2, k), this%rotated_b(6*ls - 5:6*ls), .true.)
       end associate
     end do
-    call gather_column(this, bt, this%rhs(:, 1))
+    call gather_column(this, this%rotated_b, this%rhs(:, 1))
     call this%mumps%solve_condense(this%rhs(:, 1), this%red)
     if (this%group_rank == 0) call fac%solve(this%red)
     call this%mumps%solve_expand(this%rhs(:, 1), this%red)
@@ -1260,6 +1261,7 @@ contains
     if (allocated(this%sfac%l)) deallocate (this%sfac%l)
     if (allocated(this%red)) deallocate (this%red)
     if (allocated(this%rotated)) deallocate (this%rotated)
+    if (allocated(this%rotated_b)) deallocate (this%rotated_b)
     if (this%factorized .and. .not. this%dense) call this%mumps%free()
     if (allocated(this%ufac)) deallocate (this%ufac)
     this%dense = .false.
