@@ -1,0 +1,163 @@
+#!/usr/bin/python3
+"""Weak-scaling figures of the coarse problem: runs cube_h4 at 512 and 4096
+subdomains (and the 4096 mesh without an obstacle and with a sphere of radius
+50), each --reps times, interleaved, and prints the medians of the report.json
+timings and the ratios that docs/RESULTS.md "Coarse problem at scale" quotes:
+
+- total per subdomain at 4096 against 512;
+- contact against the no-obstacle run on the same mesh (R = 1 and R = 50);
+- the coarse work's share of the total at 4096: every timer whose name starts
+  with 'coarse' or 'face:' wherever it ran (G G^T's set-up, the coarse solves
+  of every phase, the polish's face matrices and face solves, the standard
+  reconstruction's coarse assembly and factorization), not counting a timer
+  inside another one already counted.
+
+Optional cases: --with-32768 (cube_h4_n32768, minutes and about 10 GB per
+rank) and --with-h2 (the hybrid H/h = 2 pair at 4096 and 32768).
+
+  tools/coarse_targets.py --program build-release/bin/feticontact --reps 3 --dir D
+
+Standard library only (run with /usr/bin/python3). Each run's log and
+output stay in DIR/<case>_<rep>/.
+"""
+import argparse
+import json
+import os
+import re
+import statistics
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+WEAK = os.path.join(ROOT, 'inputs', 'weak')
+
+
+def variant(src, dst, obstacle):
+    """Copy of the input `src` with its &obstacle line replaced (None: as is)."""
+    text = open(src).read()
+    if obstacle is not None:
+        text, n = re.subn(r'^&obstacle[^\n]*/\s*$', obstacle, text, flags=re.M)
+        if n != 1:
+            sys.exit(f'coarse_targets: no single &obstacle line in {src}')
+    text = re.sub(r"directory\s*=\s*'[^']*'", "directory = 'output'", text)
+    with open(dst, 'w') as f:
+        f.write(text)
+
+
+def cases(args):
+    c = [('h4_n512', 'cube_h4_n512.nml', None, 512),
+         ('h4_n4096', 'cube_h4_n4096.nml', None, 4096),
+         ('h4_n4096_free', 'cube_h4_n4096.nml', "&obstacle shape = 'none' /", 4096),
+         ('h4_n4096_r50', 'cube_h4_n4096.nml',
+          "&obstacle shape = 'sphere', radius = 50.0, gap = 0.0 /", 4096)]
+    if args.with_32768:
+        c.append(('h4_n32768', 'cube_h4_n32768.nml', None, 32768))
+    if args.with_h2:
+        c += [('h2_n4096', 'cube_h2_n4096_hybrid.nml', None, 4096),
+              ('h2_n32768', 'cube_h2_n32768_hybrid.nml', None, 32768)]
+    return c
+
+
+def coarse_work(node):
+    """Sum of the maxima of the timers named coarse* or face:* (outermost only)."""
+    total = 0.0
+    for child in node.get('children', []):
+        name = child['name']
+        if name.startswith('coarse') or name.startswith('face:'):
+            total += child['max']
+        else:
+            total += coarse_work(child)
+    return total
+
+
+def run_case(args, name, nml, rep):
+    folder = os.path.join(args.dir, f'{name}_{rep}')
+    os.makedirs(folder, exist_ok=True)
+    cmd = ['mpirun', '--bind-to', 'none', '-n', str(args.ranks), args.program, nml]
+    t0 = time.time()
+    with open(os.path.join(folder, 'log.txt'), 'w') as log:
+        status = subprocess.call(cmd, cwd=folder, stdout=log, stderr=subprocess.STDOUT)
+    wall = time.time() - t0
+    rec = {'case': name, 'rep': rep, 'status': status, 'wall': wall}
+    path = os.path.join(folder, 'output', 'report.json')
+    if status == 0 and os.path.exists(path):
+        r = json.load(open(path))
+        t = r['timings']
+        rec['total'] = t['total']['max']
+        rec['coarse'] = coarse_work(t['total'])
+        for key in ('coarse setup', 'solve', 'polish', 'face: solves', 'face: matrices', 'rec new',
+                    'rec standard', 'assembly', 'B and G', 'dual setup'):
+            if key in t:
+                rec[key] = t[key]['max']
+        rec['products'] = r['solver']['hessian_multiplications']
+    return rec
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--program', required=True)
+    ap.add_argument('--ranks', type=int, default=2)
+    ap.add_argument('--reps', type=int, default=3)
+    ap.add_argument('--dir', default='coarse_targets')
+    ap.add_argument('--with-32768', action='store_true')
+    ap.add_argument('--with-h2', action='store_true')
+    args = ap.parse_args()
+    args.program = os.path.abspath(args.program)
+    os.makedirs(args.dir, exist_ok=True)
+    args.dir = os.path.abspath(args.dir)
+    env = os.environ
+    if os.getuid() == 0:
+        env.setdefault('OMPI_ALLOW_RUN_AS_ROOT', '1')
+        env.setdefault('OMPI_ALLOW_RUN_AS_ROOT_CONFIRM', '1')
+    env.setdefault('OMPI_MCA_rmaps_base_oversubscribe', '1')
+    todo = []
+    for name, src, obstacle, nsub in cases(args):
+        nml = os.path.join(args.dir, name + '.nml')
+        variant(os.path.join(WEAK, src), nml, obstacle)
+        todo.append((name, nml, nsub))
+    records = []
+    for rep in range(1, args.reps + 1):
+        for name, nml, _ in todo:
+            rec = run_case(args, name, nml, rep)
+            print(json.dumps(rec), flush=True)
+            records.append(rec)
+    med = {}
+    nsubs = {name: nsub for name, _, nsub in todo}
+    print('\n| case | runs | total [s] | coarse work [s] | coarse share | polish | face: solves | products |')
+    print('|---|---:|---:|---:|---:|---:|---:|---:|')
+    for name, _, _ in todo:
+        ok = [r for r in records if r['case'] == name and 'total' in r]
+        if not ok:
+            print(f'| {name} | 0 (failed) | | | | | | |')
+            continue
+        m = {k: statistics.median(r.get(k, 0.0) for r in ok)
+             for k in ('total', 'coarse', 'polish', 'face: solves', 'products')}
+        med[name] = m
+        print(f"| {name} | {len(ok)} | {m['total']:.3f} | {m['coarse']:.3f} | {m['coarse'] / m['total']:.0%} "
+              f"| {m['polish']:.3f} | {m['face: solves']:.3f} | {m['products']:.0f} |")
+
+    def per_sub(a, b):
+        return (med[a]['total'] / nsubs[a]) / (med[b]['total'] / nsubs[b])
+    print()
+    if 'h4_n512' in med and 'h4_n4096' in med:
+        print(f"total per subdomain, 4096 / 512: {per_sub('h4_n4096', 'h4_n512'):.2f}x (target <= 1.3x)")
+    if 'h4_n4096_free' in med:
+        for c, target in (('h4_n4096', 1.2), ('h4_n4096_r50', 1.3)):
+            if c in med:
+                print(f"{c} / no obstacle: {med[c]['total'] / med['h4_n4096_free']['total']:.2f}x "
+                      f"(target <= {target}x)")
+    if 'h4_n4096' in med:
+        print(f"coarse work at 4096: {med['h4_n4096']['coarse'] / med['h4_n4096']['total']:.0%} of the total "
+              f"(target <= 25%)")
+    if 'h4_n32768' in med and 'h4_n4096' in med:
+        print(f"total per subdomain, 32768 / 4096: {per_sub('h4_n32768', 'h4_n4096'):.2f}x (target <= 1.5x)")
+    if 'h2_n32768' in med and 'h2_n4096' in med:
+        print(f"H/h = 2, total per subdomain, 32768 / 4096: {per_sub('h2_n32768', 'h2_n4096'):.2f}x "
+              f"(target <= 1.1x)")
+    failed = [r for r in records if r['status'] != 0]
+    return 1 if failed else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
