@@ -13,7 +13,7 @@ module history_checkpoint
 
   public :: write_checkpoint, read_checkpoint, text_hash
 
-  character(len=8), parameter :: magic = 'FCHIST01'
+  character(len=8), parameter :: magic = 'FCHIST02'
 
   !> What a step reports (the log line, report.json's `history`).
   type, public :: step_record_t
@@ -21,7 +21,9 @@ module history_checkpoint
     real(dp) :: factor = 0, gap = 0
     real(dp) :: total_force = 0, max_pressure = 0, contact_radius = 0
     integer(ip) :: active_nodes = 0, outer = 0, hessian = 0
-    integer(ip) :: warm = 0                       !< 1: warm-started from the previous step
+    !> the start of the solve: 0 cold (zero), 1 the previous step's solution, 2 that scaled by the
+    !> ratio of the load factors, 3 extrapolated linearly in the load factor from the two previous steps
+    integer(ip) :: warm = 0
     !> seconds (max over ranks): right-hand sides, solve, rec new, rec standard, primal, KKT, the whole step
     real(dp) :: seconds(7) = 0
     real(dp) :: kkt_worst = 0
@@ -29,11 +31,19 @@ module history_checkpoint
     integer(ip) :: converged = 0, kkt_passed = 0
   end type step_record_t
 
+  !> The solutions of the last two steps (column 1 the last) that the next
+  !> step starts from (load_history's warm start).
+  type, public :: warm_state_t
+    integer(ip) :: n = 0                          !< steps held (0, 1, 2)
+    real(dp) :: factor(2) = 0, gap(2) = 0
+    real(dp), allocatable :: lambda(:, :), muhat(:, :)
+  end type warm_state_t
+
   type, public :: checkpoint_t
     integer(i8) :: fingerprint(2) = 0
     integer(ip) :: step = 0                       !< the last step done
     integer(ip) :: switched = 0                   !< 1: 'auto' preconditioner switched to 'dirichlet'
-    real(dp), allocatable :: lambda(:), muhat(:)
+    type(warm_state_t) :: warm
     type(step_record_t), allocatable :: records(:)
   end type checkpoint_t
 
@@ -53,8 +63,8 @@ contains
           action='write', iostat=status, iomsg=msg)
     if (status /= 0) return
     write (u, iostat=status, iomsg=msg) magic, ck%fingerprint, int(nranks, ip), int(rank, ip), ck%step, &
-      ck%switched, size(ck%lambda, kind=ip), size(ck%muhat, kind=ip), size(ck%records, kind=ip), &
-      ck%lambda, ck%muhat, ck%records
+      ck%switched, size(ck%warm%lambda, 1, kind=ip), size(ck%warm%muhat, 1, kind=ip), size(ck%records, kind=ip), &
+      ck%warm%n, ck%warm%factor, ck%warm%gap, ck%warm%lambda, ck%warm%muhat, ck%records
     if (status /= 0) return
     close (u, iostat=status, iomsg=msg)
   end subroutine write_checkpoint
@@ -109,8 +119,8 @@ contains
     else if (nl /= n_lambda .or. nm /= n_mu .or. nr < 1 .or. ck%step < 1 .or. nr /= ck%step) then
       msg = 'checkpoint '//file//' has sizes that do not fit this run'
     else
-      allocate (ck%lambda(nl), ck%muhat(nm), ck%records(nr))
-      read (u, iostat=ios) ck%lambda, ck%muhat, ck%records
+      allocate (ck%warm%lambda(nl, 2), ck%warm%muhat(nm, 2), ck%records(nr))
+      read (u, iostat=ios) ck%warm%n, ck%warm%factor, ck%warm%gap, ck%warm%lambda, ck%warm%muhat, ck%records
       if (ios /= 0) then
         msg = 'checkpoint '//file//' is truncated (unreadable data)'
       else

@@ -2,8 +2,8 @@
 !> K^+, B and G, G G^T, the explicit operators, the preconditioner, the
 !> Lanczos estimate), then per step: the right-hand sides for the step's load
 !> factor and obstacle gap (tfeti_dualization%set_load), the solve warm
-!> started from the previous step (nu = P lambda_prev, its SMALBE
-!> multiplier), the inverse of the dualization (u by the new formula, and the
+!> started from the previous steps (warm_guess: lambda and the SMALBE
+!> multiplier extrapolated in the load factor), the inverse of the dualization (u by the new formula, and the
 !> standard one with method = 'both'), the KKT check, the contact summary,
 !> one log line, the step's fields (one HDF5 file per step and a temporal
 !> XDMF collection) and a checkpoint. A step that fails stops the run with
@@ -27,7 +27,8 @@ module load_history
   use run_report, only: write_run_report, log_where_to_look
   use report, only: print_timing_table
   use json_writer, only: json_writer_t
-  use history_checkpoint, only: step_record_t, checkpoint_t, write_checkpoint, read_checkpoint, text_hash
+  use history_checkpoint, only: step_record_t, checkpoint_t, warm_state_t, write_checkpoint, read_checkpoint, &
+                                text_hash
   use stop_signal, only: install_stop_signal, stop_requested
   use mpi_f08, only: MPI_Comm, MPI_Barrier, MPI_Allreduce, MPI_Comm_rank, MPI_Comm_size, MPI_IN_PLACE, &
                      MPI_MAX, MPI_MIN, MPI_SUM, MPI_INTEGER, MPI_Wtime
@@ -35,6 +36,10 @@ module load_history
   private
 
   public :: run_load_history
+
+  !> How a step's solve started (step_record_t%warm)
+  character(len=12), parameter :: start_names(0:3) = [character(len=12) :: 'cold', 'previous', 'scaled', &
+                                                       'extrapolated']
 
 contains
 
@@ -53,13 +58,13 @@ contains
     type(timer_stat_t), allocatable :: stats(:)
     type(checkpoint_t) :: ck
     type(step_record_t), allocatable :: records(:)
-    real(dp), allocatable :: nu(:), lambda_prev(:), muhat_prev(:), work(:)
+    type(warm_state_t) :: warm
+    real(dp), allocatable :: nu(:), work(:), muhat0(:)
     real(dp) :: seconds(3), last_seconds(3), t_start
     integer(i8) :: fingerprint(2)
     integer(ip) :: step, first
     integer :: ierr, rank, nranks, stop_flag
     character(len=300) :: line
-    logical :: have_prev
 
     call MPI_Comm_rank(comm, rank, ierr)
     call MPI_Comm_size(comm, nranks, ierr)
@@ -76,13 +81,13 @@ contains
     fingerprint = history_fingerprint(p, op, nranks)
     allocate (records(0))
     first = 1
-    have_prev = .false.
+    allocate (warm%lambda(op%n_own(), 2), warm%muhat(op%n_coarse(), 2))
+    warm%lambda = 0
+    warm%muhat = 0
     if (p%history%restart) then
       call restart_from(p, comm, rank, nranks, op, dual, fingerprint, ck)
       records = ck%records
-      lambda_prev = ck%lambda
-      muhat_prev = ck%muhat
-      have_prev = .true.
+      warm = ck%warm
       first = ck%step + 1
       write (line, '(a,i0,a,i0)') 'history: restart after step ', ck%step, ' of ', p%history%nsteps
       call log_message(trim(line))
@@ -110,14 +115,17 @@ contains
         call timer_start('step rhs')
         call dual%set_load(rec%factor, rec%gap - p%obstacle%gap)
         call timer_stop('step rhs')
-        ! 2. the solve, warm started: nu = P lambda_prev (P lambda~ = 0), SMALBE projects it onto nu >= -lambda~
+        ! 2. the solve, warm started (warm_guess; nu = P lambda0, P lambda~ = 0, which SMALBE projects
+        ! onto nu >= -lambda~)
         call solver%init(p%solver%smalbe, dual%hessian_norm())
         nu = 0
-        if (have_prev .and. p%history%warm_start) then
-          work = lambda_prev
+        if (warm%n > 0 .and. p%history%warm_start) then
+          call warm_guess(warm, rec%factor, rec%gap, work, muhat0, rec%warm)
           call op%project(work, nu)
-          solver%muhat_start = muhat_prev
-          rec%warm = 1
+          ! contact rows without force in the guess exactly at their bound (lambda = 0), not a
+          ! rounding error above it: their face is that of the guess
+          where (op%is_contact() .and. work <= 0) nu = op%lower_bounds()
+          solver%muhat_start = muhat0
         end if
         call dual%solve_from(solver, nu, seconds)
         last_seconds = seconds
@@ -144,9 +152,7 @@ contains
         call MPI_Allreduce(MPI_IN_PLACE, rec%seconds, size(rec%seconds), MPI_REAL_DP, MPI_MAX, comm, ierr)
         records = [records, rec]
         call log_step(rec, p%history%nsteps)
-        lambda_prev = sol%lambda
-        muhat_prev = solver%muhat
-        have_prev = .true.
+        call remember(warm, rec%factor, rec%gap, sol%lambda, solver%muhat)
         ! 5. a failed step stops the history
         if (rec%converged == 0) then
           write (line, '(a,i0,a,es10.3,2a)') 'feticontact: step ', step, ' (load factor ', rec%factor, &
@@ -166,8 +172,7 @@ contains
           ck%fingerprint = fingerprint
           ck%step = step
           ck%switched = merge(1, 0, dual%preconditioner_switched())
-          ck%lambda = sol%lambda
-          ck%muhat = solver%muhat
+          ck%warm = warm
           ck%records = records
           call save_checkpoint(p, comm, rank, nranks, ck)
         end if
@@ -196,6 +201,54 @@ contains
     call log_where_to_look(p)
     call dual%free()
   end subroutine run_load_history
+
+  !> The start of the next solve from the last steps held in `ws`:
+  !> lambda and the SMALBE multiplier are affine in the load factor while
+  !> the active set and the obstacle stay (d, e, lambda~ are, and the gaps
+  !> do not change), so with two earlier steps at the same gap and
+  !> different factors the start is their linear extrapolation to `factor`
+  !> (how = 3), exact for an unchanged active set; with one at the same gap,
+  !> its solution scaled by factor / its factor (how = 2: exact when the
+  !> constant part vanishes, as for an obstacle touching at one point);
+  !> else the last solution itself (how = 1).
+  subroutine warm_guess(ws, factor, gap, lambda0, muhat0, how)
+    type(warm_state_t), intent(in) :: ws
+    real(dp), intent(in) :: factor, gap
+    real(dp), intent(out) :: lambda0(:)
+    real(dp), allocatable, intent(out) :: muhat0(:)
+    integer(ip), intent(out) :: how
+    real(dp) :: t
+    if (ws%n >= 2 .and. ws%gap(1) == gap .and. ws%gap(2) == gap .and. ws%factor(1) /= ws%factor(2)) then
+      t = (factor - ws%factor(1))/(ws%factor(1) - ws%factor(2))
+      lambda0 = ws%lambda(:, 1) + t*(ws%lambda(:, 1) - ws%lambda(:, 2))
+      muhat0 = ws%muhat(:, 1) + t*(ws%muhat(:, 1) - ws%muhat(:, 2))
+      how = 3
+    else if (ws%gap(1) == gap .and. ws%factor(1) > 0) then
+      t = factor/ws%factor(1)
+      lambda0 = t*ws%lambda(:, 1)
+      muhat0 = t*ws%muhat(:, 1)
+      how = 2
+    else
+      lambda0 = ws%lambda(:, 1)
+      muhat0 = ws%muhat(:, 1)
+      how = 1
+    end if
+  end subroutine warm_guess
+
+  !> Keep the solution of the step just done as the last one of `ws`.
+  subroutine remember(ws, factor, gap, lambda, muhat)
+    type(warm_state_t), intent(inout) :: ws
+    real(dp), intent(in) :: factor, gap, lambda(:), muhat(:)
+    ws%lambda(:, 2) = ws%lambda(:, 1)
+    ws%muhat(:, 2) = ws%muhat(:, 1)
+    ws%factor(2) = ws%factor(1)
+    ws%gap(2) = ws%gap(1)
+    ws%lambda(:, 1) = lambda
+    ws%muhat(:, 1) = muhat
+    ws%factor(1) = factor
+    ws%gap(1) = gap
+    ws%n = min(ws%n + 1, 2_ip)
+  end subroutine remember
 
   !> The fingerprint of the input (every group as echoed, without the
   !> &history variables that only steer a run: restart, time_limit,
@@ -247,6 +300,10 @@ contains
     integer :: status, bad, ierr, steps(2)
     character(len=600) :: msg
     call read_checkpoint(checkpoint_base(p), rank, nranks, fingerprint, op%n_own(), op%n_coarse(), ck, status, msg)
+    if (status == 0 .and. ck%warm%n < 1) then
+      status = 1
+      msg = 'checkpoint '//trim(checkpoint_base(p))//' holds no solution'
+    end if
     steps = -1
     if (status == 0) steps = [int(ck%step), -int(ck%step)]
     call MPI_Allreduce(MPI_IN_PLACE, steps, 2, MPI_INTEGER, MPI_MAX, comm, ierr)
@@ -374,7 +431,7 @@ contains
     write (line, '(a,i0,a,i0,a,f8.4,a,es10.3,a,es11.4,a,i0,a,es10.3,a,es10.3,a,i0,a,i0,3a,es9.2,a,es9.2,a,es9.2,a,a)') &
       'step ', rec%step, '/', nsteps, ': factor ', rec%factor, ', gap ', rec%gap, ', force ', rec%total_force, &
       ', contact nodes ', rec%active_nodes, ', radius ', rec%contact_radius, ', max pressure ', rec%max_pressure, &
-      ', outer ', rec%outer, ', Hessian ', rec%hessian, ' (', trim(merge('warm', 'cold', rec%warm == 1)), &
+      ', outer ', rec%outer, ', Hessian ', rec%hessian, ' (', trim(start_names(rec%warm)), &
       '), rec new ', rec%seconds(3), ' s, rec standard ', rec%seconds(4), ' s, KKT ', rec%kkt_worst, &
       merge(' ok    ', ' FAILED', rec%kkt_passed == 1)
     call log_message(trim(line))
@@ -414,7 +471,7 @@ contains
         call js%add('active_nodes', int(r%active_nodes, i8))
         call js%add_each([character(len=24) :: 'outer_iterations', 'hessian_multiplications'], &
                          int([r%outer, r%hessian], i8))
-        call js%add('warm_start', r%warm == 1)
+        call js%add('warm_start', trim(start_names(r%warm)))
         call js%begin_object('seconds')
         call js%add_each([character(len=16) :: 'rhs', 'solve', 'rec_new', 'rec_standard', 'primal', 'kkt', &
                           'step'], r%seconds)

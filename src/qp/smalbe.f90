@@ -580,6 +580,8 @@ contains
     call ensure_size(self%muhat, m)
     call ensure_size(self%rule%z, m)
     call self%polish%start(problem, n, self%monitor)
+    ! a warm start (muhat_start): the polish first starts from the face of x
+    self%polish%warm_face = allocated(self%muhat_start)
 
     self%rho = problem%penalty()
     self%rho_initial = self%rho
