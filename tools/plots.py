@@ -481,6 +481,47 @@ def hertz_indentation(force, estar, radius):
     return (3 * np.asarray(force) / (4 * estar * math.sqrt(radius))) ** (2 / 3)
 
 
+def history_costs(report, path, cold_path=None):
+    """The costs of a history: the first step's total (set-up + step 1: the program's total less
+    the later steps), each later step against it, Hessian products (against a cold history of
+    the same loads, --cold), accumulated reconstruction seconds new against standard."""
+    steps = report["history"]
+    total = report["timings"]["total"]["max"]
+    later = [s["seconds"]["step"] for s in steps[1:]]
+    first = total - sum(later)
+    print("first step's total (set-up + step 1): %.3f s; later steps: mean %.3f s = %.1f%%, max %.3f s = %.1f%%" % (
+        first, statistics.mean(later) if later else 0, 100 * statistics.mean(later) / first if later else 0,
+        max(later) if later else 0, 100 * max(later) / first if later else 0))
+    cold = None
+    if cold_path:
+        cp = os.path.join(cold_path, "report.json") if os.path.isdir(cold_path) else cold_path
+        with open(cp) as f:
+            cold = json.load(f)["history"]
+        if [s["load_factor"] for s in cold] != [s["load_factor"] for s in steps]:
+            sys.exit("plots: --cold has other load factors than %s" % path)
+    print("| step | factor | start | outer | Hessian | %sstep [s] | rec new [s] | rec standard [s] |" % (
+        "Hessian cold | cold / warm | " if cold else ""))
+    print("|---:|---:|---|---:|---:|%s---:|---:|---:|" % ("---:|---:|" if cold else ""))
+    for k, s in enumerate(steps):
+        extra = ""
+        if cold:
+            hc = cold[k]["hessian_multiplications"]
+            extra = "%d | %.2f | " % (hc, hc / max(s["hessian_multiplications"], 1))
+        print("| %d | %.3f | %s | %d | %d | %s%.3f | %.3g | %.3g |" % (
+            s["step"], s["load_factor"], s["warm_start"], s["outer_iterations"], s["hessian_multiplications"], extra,
+            s["seconds"]["step"], s["seconds"]["rec_new"], s["seconds"]["rec_standard"]))
+    hw = [s["hessian_multiplications"] for s in steps[1:]]
+    line = "Hessian products per step after the first: mean %.1f" % (statistics.mean(hw) if hw else 0)
+    if cold:
+        hc = [s["hessian_multiplications"] for s in cold[1:]]
+        line += " (cold %.1f: %.2fx)" % (statistics.mean(hc), statistics.mean(hc) / max(statistics.mean(hw), 1e-300))
+    print(line)
+    rn = sum(s["seconds"]["rec_new"] for s in steps)
+    rs = sum(s["seconds"]["rec_standard"] for s in steps)
+    print("reconstruction over %d steps: new %.4f s, standard %.4f s (standard / new %.1f)" % (
+        len(steps), rn, rs, rs / rn if rn > 0 else float("nan")))
+
+
 def cmd_history(args):
     path = args.run
     if os.path.isdir(path):
@@ -534,6 +575,7 @@ def cmd_history(args):
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     save(fig, figures_dir(args, path), args.name)
+    history_costs(report, path, args.cold)
     if sphere:
         print("C = %.4g mm/N (%s; 1/(E L_z) = %.4g)" % (c, how, 1 / (young * case["mesh"]["lengths"][2])))
         print("| step | factor | delta [mm] | d [mm] | F [N] | Hertz P(d) [N] | F / P |")
@@ -601,6 +643,7 @@ def main():
     p.add_argument("run", help="a history run's output directory (with report.json) or its report.json")
     p.add_argument("--compliance", type=float,
                    help="the body's compliance C [mm/N] in d = delta - C F (default: least squares over the steps)")
+    p.add_argument("--cold", help="a cold history of the same loads (warm_start = .false.): Hessian products compared")
     p.add_argument("--name", default="history_force", help="file name (default %(default)s.png)")
     p.set_defaults(func=cmd_history)
 
