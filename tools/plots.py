@@ -549,11 +549,11 @@ def cmd_history(args):
         young, nu, radius = case["material"]["young"], case["material"]["poisson"], case["obstacle"]["radius"]
         estar = young / (1 - nu**2)
         # the body's own compliance C (the approach of the top face that is not the local Hertz
-        # indentation): d = delta - C F; given (--compliance) or fitted by least squares over the
-        # steps with contact (one parameter, the Hertz law itself is not fitted)
+        # indentation): d = delta - C F; given (--compliance, default 0: d = delta) or fitted by
+        # least squares over the steps with contact (--compliance fit; the Hertz law is not fitted)
         on = force > 0
-        if args.compliance is not None:
-            c = args.compliance
+        if args.compliance != "fit":
+            c = float(args.compliance)
             how = "given"
         else:
             dh = hertz_indentation(force[on], estar, radius)
@@ -562,7 +562,9 @@ def cmd_history(args):
         d = delta - c * force
         hertz = 4 / 3 * estar * math.sqrt(radius) * np.clip(d, 0, None) ** 1.5
         dd = np.linspace(0, max(d.max(), 1e-300) * 1.05, 200)
-        ax.plot(d, force, "s", ms=4, color="C1", label="computed: against the indentation d = delta - C F")
+        if c != 0:
+            ax.plot(d, force, "s", ms=4, color="C1", label="computed: against the indentation d = delta - C F "
+                    "(C = %.3g mm/N, %s)" % (c, how))
         ax.plot(dd, 4 / 3 * estar * math.sqrt(radius) * dd**1.5, "k-",
                 label="Hertz: P = 4/3 E* R^1/2 d^3/2 (E* = %.4g MPa, R = %g mm)" % (estar, radius))
         for k in order:
@@ -641,8 +643,9 @@ def main():
 
     p = sub.add_parser("history", help="(e) force against indentation of a load history, Hertz for a sphere")
     p.add_argument("run", help="a history run's output directory (with report.json) or its report.json")
-    p.add_argument("--compliance", type=float,
-                   help="the body's compliance C [mm/N] in d = delta - C F (default: least squares over the steps)")
+    p.add_argument("--compliance", default="0",
+                   help="the body's compliance C [mm/N] in d = delta - C F, or 'fit' (least squares over the "
+                        "steps); default 0: the indentation is the top face's approach delta")
     p.add_argument("--cold", help="a cold history of the same loads (warm_start = .false.): Hessian products compared")
     p.add_argument("--name", default="history_force", help="file name (default %(default)s.png)")
     p.set_defaults(func=cmd_history)
