@@ -15,6 +15,9 @@ CHECK is one of
             and bit-identical HDF5 fields as an uninterrupted one.
   bad       bad history input and bad checkpoints: exit status 2 and a
             message naming the group and variable (or the checkpoint).
+  signal    SIGUSR1 to mpirun (forwarded to the ranks; SIGTERM under a batch
+            system) stops a long history after the step under way, with its
+            checkpoint; restart = .true. continues with the next step to the end.
   paraview  ParaView (pvpython, Debian's python3-paraview, under xvfb-run)
             opens the temporal XDMF and steps through every time; exit 77
             (skipped) when pvpython is absent.
@@ -220,6 +223,39 @@ def check_bad(args):
     print('bad: %d input errors and 3 checkpoint errors refused with exit 2' % len(cases))
 
 
+def check_signal(args):
+    import signal
+    import time
+    work = fresh(os.path.join(args.workdir, 'signal'))
+    out = os.path.join(work, 'out')
+    nml = os.path.join(work, 'h.nml')
+    hist = "&history nsteps = 200, path = 'ramp'%s /\n"
+    write_input(nml, TOP_UZ, 0.0, out, hist % '')
+    log = os.path.join(work, 'log.txt')
+    with open(log, 'w') as f:
+        p = subprocess.Popen([args.mpiexec, '-n', str(args.ranks), args.program, nml], stdout=f,
+                             stderr=subprocess.STDOUT)
+        t0 = time.time()
+        while time.time() - t0 < 600:
+            time.sleep(0.5)
+            if re.search(r'^step 2/200', open(log).read(), re.M) or p.poll() is not None:
+                break
+        p.send_signal(signal.SIGUSR1)
+        rc = p.wait(timeout=600)
+    text = open(log).read()
+    m = re.search(r'stopped after step (\d+) of 200 \(stop signal\)', text)
+    assert rc == 0 and m, 'exit %d, log:\n%s' % (rc, text[-3000:])
+    k = int(m.group(1))
+    assert k < 200, k
+    nml2 = os.path.join(work, 'restart.nml')
+    write_input(nml2, TOP_UZ, 0.0, out, hist % ', restart = .true.')
+    r = run(args, nml2)
+    assert 'restart after step %d of 200' % k in r.stdout, r.stdout[-2000:]
+    rep = json.load(open(os.path.join(out, 'report.json')))
+    assert [s['step'] for s in rep['history']] == list(range(1, 201))
+    print('signal: stopped after step %d of 200, restarted and finished' % k)
+
+
 PV_SCRIPT = r"""
 import sys
 from paraview.simple import XDMFReader, UpdatePipeline, servermanager
@@ -270,11 +306,11 @@ def main():
     ap.add_argument('--mpiexec', default='mpirun')
     ap.add_argument('--ranks', type=int, default=2)
     ap.add_argument('--workdir', required=True)
-    ap.add_argument('check', choices=['steps', 'restart', 'bad', 'paraview'])
+    ap.add_argument('check', choices=['steps', 'restart', 'bad', 'signal', 'paraview'])
     args = ap.parse_args()
     os.makedirs(args.workdir, exist_ok=True)
     status = {'steps': check_steps, 'restart': check_restart, 'bad': check_bad,
-              'paraview': check_paraview}[args.check](args)
+              'signal': check_signal, 'paraview': check_paraview}[args.check](args)
     return status or 0
 
 
