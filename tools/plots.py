@@ -489,6 +489,9 @@ def history_costs(report, path, cold_path=None):
     total = report["timings"]["total"]["max"]
     later = [s["seconds"]["step"] for s in steps[1:]]
     first = total - sum(later)
+    if (report["case"].get("history") or {}).get("restart"):
+        print("(a restarted run: its total covers only the steps it made; the first step's total is not known)")
+        first = float("nan")
     print("first step's total (set-up + step 1): %.3f s; later steps: mean %.3f s = %.1f%%, max %.3f s = %.1f%%" % (
         first, statistics.mean(later) if later else 0, 100 * statistics.mean(later) / first if later else 0,
         max(later) if later else 0, 100 * max(later) / first if later else 0))
