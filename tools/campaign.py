@@ -439,8 +439,38 @@ def columns_for(rows):
     return cols + tcols + extra
 
 
+# A load history (&history): report.json's `history` gives one CSV row per step, the run's
+# columns kept (its report sections are those of the last step) and these added.
+STEP_COLUMNS = [("step", "step"), ("step_load_factor", "load_factor"), ("step_gap", "gap"),
+                ("step_total_force", "total_force"), ("step_active_nodes", "active_nodes"),
+                ("step_contact_radius", "contact_radius"), ("step_max_pressure", "max_pressure"),
+                ("step_outer", "outer_iterations"), ("step_hessian", "hessian_multiplications"),
+                ("step_warm_start", "warm_start"), ("step_kkt_worst", "kkt_worst"), ("step_kkt_passed", "kkt_passed"),
+                ("step_seconds", "seconds/step"), ("step_rhs_seconds", "seconds/rhs"),
+                ("step_solve_seconds", "seconds/solve"), ("step_rec_new_seconds", "seconds/rec_new"),
+                ("step_rec_standard_seconds", "seconds/rec_standard")]
+
+
+def step_rows(rows):
+    """Each row of a history run (its `_history`, from report.json) as one row per step."""
+    out = []
+    for r in rows:
+        steps = r.get("_history")
+        if not steps:
+            out.append(r)
+            continue
+        for rec in steps:
+            row = {k: v for k, v in r.items() if k != "_history"}
+            row.update({col: cell(dig(rec, path.split("/"))) for col, path in STEP_COLUMNS})
+            out.append(row)
+    return out
+
+
 def write_csv(path, rows):
+    rows = step_rows(rows)
     cols = columns_for(rows)
+    if any(r.get("step", "") != "" for r in rows):
+        cols = cols + [c for c, _ in STEP_COLUMNS if c not in cols]
     tmp = path + ".tmp"
     with open(tmp, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
@@ -678,7 +708,10 @@ def run_row(record, outcome):
     if os.path.exists(report_path):
         try:
             with open(report_path) as f:
-                row.update(report_row(json.load(f)))
+                report = json.load(f)
+                row.update(report_row(report))
+                if report.get("history"):
+                    row["_history"] = report["history"]
         except (OSError, ValueError) as e:
             row["status"] = "unreadable report.json: %s" % e
     h5 = sorted(glob.glob(os.path.join(run_dir, "out", "*.h5")))

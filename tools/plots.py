@@ -5,6 +5,7 @@
     tools/plots.py reconstruction CAMPAIGN [CAMPAIGN ...]  reconstruction cost, new (Eq. 24) vs standard (Eq. 10)
     tools/plots.py tolerance CAMPAIGN [--reference H5]     speed against accuracy of a --sweep solver:tol=... campaign
     tools/plots.py hertz RUN_OUT_DIR_OR_H5                 contact pressure against the Hertz solution
+    tools/plots.py history RUN_OUT_DIR_OR_REPORT           force against indentation of a load history (&history)
 
 CAMPAIGN is a campaign directory (tools/campaign.py --out) or its campaign.csv.
 Every subcommand writes its PNG(s) next to its data (the folder of the first
@@ -474,6 +475,124 @@ def cmd_hertz(args):
     print("h = %.4g mm, a/h = %.2f; a/R = %.3f, a/Lx = %.3f (Hertz assumes both small)" % (
         h, a / h, a / radius, a / lx))
 
+# ---------------------------------------------------------------- (e) load history
+def hertz_indentation(force, estar, radius):
+    """d of Hertz's law P = (4/3) E* R^(1/2) d^(3/2) for the force P."""
+    return (3 * np.asarray(force) / (4 * estar * math.sqrt(radius))) ** (2 / 3)
+
+
+def history_costs(report, path, cold_path=None):
+    """The costs of a history: the first step's total (set-up + step 1: the program's total less
+    the later steps), each later step against it, Hessian products (against a cold history of
+    the same loads, --cold), accumulated reconstruction seconds new against standard."""
+    steps = report["history"]
+    total = report["timings"]["total"]["max"]
+    later = [s["seconds"]["step"] for s in steps[1:]]
+    first = total - sum(later)
+    if (report["case"].get("history") or {}).get("restart"):
+        print("(a restarted run: its total covers only the steps it made; the first step's total is not known)")
+        first = float("nan")
+    print("first step's total (set-up + step 1): %.3f s; later steps: mean %.3f s = %.1f%%, max %.3f s = %.1f%%" % (
+        first, statistics.mean(later) if later else 0, 100 * statistics.mean(later) / first if later else 0,
+        max(later) if later else 0, 100 * max(later) / first if later else 0))
+    cold = None
+    if cold_path:
+        cp = os.path.join(cold_path, "report.json") if os.path.isdir(cold_path) else cold_path
+        with open(cp) as f:
+            cold = json.load(f)["history"]
+        if [s["load_factor"] for s in cold] != [s["load_factor"] for s in steps]:
+            sys.exit("plots: --cold has other load factors than %s" % path)
+    print("| step | factor | start | outer | Hessian | %sstep [s] | rec new [s] | rec standard [s] |" % (
+        "Hessian cold | cold / warm | " if cold else ""))
+    print("|---:|---:|---|---:|---:|%s---:|---:|---:|" % ("---:|---:|" if cold else ""))
+    for k, s in enumerate(steps):
+        extra = ""
+        if cold:
+            hc = cold[k]["hessian_multiplications"]
+            extra = "%d | %.2f | " % (hc, hc / max(s["hessian_multiplications"], 1))
+        print("| %d | %.3f | %s | %d | %d | %s%.3f | %.3g | %.3g |" % (
+            s["step"], s["load_factor"], s["warm_start"], s["outer_iterations"], s["hessian_multiplications"], extra,
+            s["seconds"]["step"], s["seconds"]["rec_new"], s["seconds"]["rec_standard"]))
+    hw = [s["hessian_multiplications"] for s in steps[1:]]
+    line = "Hessian products per step after the first: mean %.1f" % (statistics.mean(hw) if hw else 0)
+    if cold:
+        hc = [s["hessian_multiplications"] for s in cold[1:]]
+        line += " (cold %.1f: %.2fx)" % (statistics.mean(hc), statistics.mean(hc) / max(statistics.mean(hw), 1e-300))
+    print(line)
+    rn = sum(s["seconds"]["rec_new"] for s in steps)
+    rs = sum(s["seconds"]["rec_standard"] for s in steps)
+    print("reconstruction over %d steps: new %.4f s, standard %.4f s (standard / new %.1f)" % (
+        len(steps), rn, rs, rs / rn if rn > 0 else float("nan")))
+
+
+def cmd_history(args):
+    path = args.run
+    if os.path.isdir(path):
+        path = os.path.join(path, "report.json")
+    with open(path) as f:
+        report = json.load(f)
+    steps = report.get("history")
+    if not steps:
+        sys.exit("plots: %s has no load history (report.json without `history`)" % path)
+    case = report["case"]
+    top = abs(case["boundary"]["top_displacement"][2])
+    gap0 = case["obstacle"]["gap"]
+    factor = np.array([s["load_factor"] for s in steps])
+    force = np.array([s["total_force"] for s in steps])
+    gap = np.array([s["gap"] for s in steps])
+    # the approach of the top face and the obstacle: the top moves down by factor |u_top|,
+    # the obstacle down by its gap (from where the input puts it, gap0: touching at 0)
+    delta = factor * top - (gap - gap0) - gap0
+    sphere = case["obstacle"]["shape"] == "sphere"
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    order = np.arange(len(steps))
+    ax.plot(delta, force, "-o", ms=4, color="C0", label="computed: force against the top's approach (delta)")
+    rows = []
+    if sphere:
+        young, nu, radius = case["material"]["young"], case["material"]["poisson"], case["obstacle"]["radius"]
+        estar = young / (1 - nu**2)
+        # the body's own compliance C (the approach of the top face that is not the local Hertz
+        # indentation): d = delta - C F; given (--compliance, default 0: d = delta) or fitted by
+        # least squares over the steps with contact (--compliance fit; the Hertz law is not fitted)
+        on = force > 0
+        if args.compliance != "fit":
+            c = float(args.compliance)
+            how = "given"
+        else:
+            dh = hertz_indentation(force[on], estar, radius)
+            c = float(np.sum(force[on] * (delta[on] - dh)) / np.sum(force[on] ** 2))
+            how = "fitted"
+        d = delta - c * force
+        hertz = 4 / 3 * estar * math.sqrt(radius) * np.clip(d, 0, None) ** 1.5
+        dd = np.linspace(0, max(d.max(), 1e-300) * 1.05, 200)
+        if c != 0:
+            ax.plot(d, force, "s", ms=4, color="C1", label="computed: against the indentation d = delta - C F "
+                    "(C = %.3g mm/N, %s)" % (c, how))
+        ax.plot(dd, 4 / 3 * estar * math.sqrt(radius) * dd**1.5, "k-",
+                label="Hertz: P = 4/3 E* R^1/2 d^3/2 (E* = %.4g MPa, R = %g mm)" % (estar, radius))
+        for k in order:
+            rows.append((steps[k]["step"], factor[k], delta[k], d[k], force[k], hertz[k],
+                         force[k] / hertz[k] if hertz[k] > 0 else float("nan")))
+    ax.set_xlabel("approach / indentation [mm]")
+    ax.set_ylabel("contact force [N]")
+    ax.set_title("%s: force against indentation over %d steps" % (case["output"]["run_name"], len(steps)),
+                 fontsize=10)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    save(fig, figures_dir(args, path), args.name)
+    history_costs(report, path, args.cold)
+    if sphere:
+        print("C = %.4g mm/N (%s; 1/(E L_z) = %.4g)" % (c, how, 1 / (young * case["mesh"]["lengths"][2])))
+        print("| step | factor | delta [mm] | d [mm] | F [N] | Hertz P(d) [N] | F / P |")
+        print("|---:|---:|---:|---:|---:|---:|---:|")
+        for r in rows:
+            print("| %d | %.3f | %.5g | %.5g | %.5g | %.5g | %.4f |" % r)
+    else:
+        print("| step | factor | delta [mm] | F [N] |")
+        print("|---:|---:|---:|---:|")
+        for k in order:
+            print("| %d | %.3f | %.5g | %.5g |" % (steps[k]["step"], factor[k], delta[k], force[k]))
+
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0], epilog=__doc__.split("\n", 2)[2],
@@ -524,6 +643,15 @@ def main():
     p.add_argument("--report", help="report.json of the run (default: beside the .h5)")
     p.add_argument("--name", default="hertz", help="file name (default %(default)s.png)")
     p.set_defaults(func=cmd_hertz)
+
+    p = sub.add_parser("history", help="(e) force against indentation of a load history, Hertz for a sphere")
+    p.add_argument("run", help="a history run's output directory (with report.json) or its report.json")
+    p.add_argument("--compliance", default="0",
+                   help="the body's compliance C [mm/N] in d = delta - C F, or 'fit' (least squares over the "
+                        "steps); default 0: the indentation is the top face's approach delta")
+    p.add_argument("--cold", help="a cold history of the same loads (warm_start = .false.): Hessian products compared")
+    p.add_argument("--name", default="history_force", help="file name (default %(default)s.png)")
+    p.set_defaults(func=cmd_history)
 
     args = ap.parse_args()
     signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # `| head` ends quietly

@@ -18,6 +18,7 @@ module contact_run
   use field_output, only: write_run_fields
   use run_report, only: write_run_report, log_where_to_look
   use report, only: print_timing_table
+  use load_history, only: run_load_history
   use mpi_f08, only: MPI_Comm, MPI_Barrier
   implicit none
   private
@@ -46,6 +47,11 @@ contains
     character(len=200) :: line
     integer :: ierr
 
+    if (p%history%is_history()) then
+      ! &history: one set-up, a solve per step (load_history)
+      call run_load_history(p, comm, status)
+      return
+    end if
     if (p%output%write_hdf5 .or. p%output%write_report) call check_output_directory(comm, p%output%directory)
     call MPI_Barrier(comm, ierr)
     call timer_start('total')

@@ -91,9 +91,11 @@ module dual_problem
     !> the face solve uses face_operator_lazy (tests compare with .false.: face_operator)
     logical :: lazy_face = .true.
     logical, private :: face_ready = .false.
+    logical, private :: stop_violation = .true.   !< &solver stopping = 'violation'
   contains
     procedure :: init
     procedure :: prepare
+    procedure :: form_rhs
     procedure :: apply_projector
     procedure :: hessian
     procedure :: penalty
@@ -137,13 +139,7 @@ contains
     type(feti_t), intent(inout), target :: op
     real(dp), intent(in) :: rho_scale
     character(len=*), intent(in), optional :: stopping
-    logical :: violation
-    integer(ip) :: n, ls
-    real(dp) :: mine
-    real(dp), allocatable :: unit(:), d(:)
-    logical, allocatable :: contact(:)
-    type(subdomain_t), pointer :: subs(:)
-    integer :: ierr
+    integer(ip) :: n
     call self%free()
     self%op => op
     n = op%n_own()
@@ -163,6 +159,26 @@ contains
     self%tracked_residuals = 0
     self%n_products = 0
     call self%prepare()
+    self%stop_violation = .true.
+    if (present(stopping)) self%stop_violation = stopping == 'violation'
+    call self%form_rhs()
+  end subroutine init
+
+  !> The data of the QP that the right-hand sides d, lambda~ of the FETI
+  !> operators give: b = P (d - F lambda~)/s, the lower bounds and the
+  !> stopping scale. After init, and again after a step of a load history
+  !> changed them (feti_t%set_load). Collective.
+  subroutine form_rhs(self)
+    class(dual_problem_t), intent(inout) :: self
+    logical :: violation
+    integer(ip) :: n, ls
+    real(dp) :: mine
+    real(dp), allocatable :: unit(:), d(:)
+    logical, allocatable :: contact(:)
+    type(subdomain_t), pointer :: subs(:)
+    integer :: ierr
+    associate (op => self%op)
+    n = op%n_own()
     ! b = P (d - F lambda~)
     call op%apply_f(op%lambda_tilde_vector(), self%fpx)
     self%fpx = op%dual_rhs() - self%fpx
@@ -177,12 +193,12 @@ contains
     ! jumps of the subdomains deformed by their loads, B K^+ f), in the units
     ! of the scaled QP (/s). Not max |W b|: P mixes the Dirichlet values of
     ! the stiff subdomains, sqrt(E/young) times larger, into every row.
-    violation = .true.
-    if (present(stopping)) violation = stopping == 'violation'
+    violation = self%stop_violation
     if (violation) then
       unit = op%row_units()
       d = op%dual_rhs()
       contact = op%is_contact()
+      if (allocated(self%stop_weight)) deallocate (self%stop_weight)
       allocate (self%stop_weight(n))
       self%stop_weight = 1/unit(1:n)
       mine = 0
@@ -198,7 +214,8 @@ contains
       self%stop_scale = self%stop_scale/self%scale
       self%relative_eq_measure = .true.
     end if
-  end subroutine init
+    end associate
+  end subroutine form_rhs
 
   !> y = (P F P x + rho Q x)/s, with Q x = x - P x.
   subroutine hessian(self, x, y)

@@ -43,11 +43,17 @@ module tfeti_dualization
     class(dual_problem_t), pointer :: dual => null()   !< the one of the two in use
     character(len=name_len) :: method = 'both'         !< &reconstruction method
     real(dp) :: active_tol = 0
+    real(dp) :: history_penalty = 0                    !< the scaled penalty every step of a history starts with
   contains
     procedure :: setup
     procedure :: problem
     procedure :: hessian_norm
     procedure :: solve
+    procedure :: solve_from
+    procedure :: set_load
+    procedure :: prepare_history
+    procedure :: preconditioner_switched
+    procedure :: switch_preconditioner
     procedure :: post_solve
     procedure :: operators
     procedure :: sizes
@@ -171,20 +177,69 @@ contains
     class(qp_solver_t), intent(inout) :: solver
     real(dp), allocatable, intent(out) :: nu(:)
     real(dp), intent(out) :: seconds(3)            !< solve, F action, coarse solve
-    real(dp) :: before(2)
-    integer :: ierr
     allocate (nu(this%op%n_own()))
     nu = 0
-    before = [timer_seconds('F action'), timer_seconds('coarse solve')]
+    call this%solve_from(solver, nu, seconds)
+  end subroutine solve
+
+  !> Solve the dual QP by `solver` from the given nu (a warm start; SMALBE
+  !> projects it onto the bounds), timed as `solve`.
+  subroutine solve_from(this, solver, nu, seconds)
+    class(tfeti_dualization_t), intent(inout) :: this
+    class(qp_solver_t), intent(inout) :: solver
+    real(dp), intent(inout) :: nu(:)
+    real(dp), intent(out) :: seconds(3)            !< solve, F action, coarse solve
+    real(dp) :: before(3)
+    integer :: ierr
+    before = [timer_seconds('solve'), timer_seconds('F action'), timer_seconds('coarse solve')]
     call timer_start('solve')
     call solver%solve(this%dual, nu)
     call timer_stop('solve')
-    seconds = [timer_seconds('solve'), timer_seconds('F action') - before(1), timer_seconds('coarse solve') - before(2)]
+    seconds = [timer_seconds('solve') - before(1), timer_seconds('F action') - before(2), &
+               timer_seconds('coarse solve') - before(3)]
     call MPI_Allreduce(MPI_IN_PLACE, seconds, 3, MPI_REAL_DP, MPI_MAX, this%op%comm(), ierr)
     ! 'auto' that did not switch says so (the switch itself is logged where it happens)
     if (this%dual%auto_mode .and. this%dual%switch_at < 0) &
       call log_message("preconditioner 'auto': no switch (lumped throughout)")
-  end subroutine solve
+  end subroutine solve_from
+
+  !> Before the first step of a load history: every state that a solve
+  !> would otherwise settle on its way (a deferred explicit F, the Lanczos
+  !> estimate of ||P F P||) settled now, so that each step sees the same
+  !> operators whether it follows other steps or a restart. Collective.
+  subroutine prepare_history(this)
+    class(tfeti_dualization_t), intent(inout) :: this
+    real(dp) :: a_norm
+    call this%op%settle_f_action()
+    a_norm = this%dual%refined_norm()
+    this%history_penalty = this%dual%penalty()
+  end subroutine prepare_history
+
+  !> `&solver preconditioner = 'auto'` has switched to 'dirichlet'.
+  logical function preconditioner_switched(this)
+    class(tfeti_dualization_t), intent(in) :: this
+    preconditioner_switched = this%dual%auto_mode .and. this%dual%switch_at >= 0
+  end function preconditioner_switched
+
+  !> 'auto': switch to 'dirichlet' now (a restart of a history whose earlier
+  !> steps switched). Nothing when it has switched or is not 'auto'. Collective.
+  subroutine switch_preconditioner(this)
+    class(tfeti_dualization_t), intent(inout) :: this
+    logical :: switched
+    call this%dual%condition_estimate(huge(1.0_dp), switched)
+  end subroutine switch_preconditioner
+
+  !> The right-hand sides of a step of a load history (feti_t%set_load: the
+  !> load factor, the obstacle moved by gap_shift) and the dual QP's linear
+  !> term, bounds and stopping scale; the penalty back at its value of the
+  !> history's start (SMALBE may have raised it). Collective.
+  subroutine set_load(this, factor, gap_shift)
+    class(tfeti_dualization_t), intent(inout) :: this
+    real(dp), intent(in) :: factor, gap_shift
+    call this%op%set_load(factor, gap_shift)
+    if (this%history_penalty > 0) call this%dual%set_penalty(this%history_penalty)
+    call this%dual%form_rhs()
+  end subroutine set_load
 
   !> The penalty rho of Eq. (8), unscaled.
   real(dp) function rho(this)

@@ -51,6 +51,7 @@ module b_operator
     procedure :: is_contact
     procedure :: force_scale
     procedure :: gap_rhs
+    procedure :: set_gap_rhs
     procedure :: row_node_gid
     procedure :: row_coordinates
     procedure :: keyed_random
@@ -326,6 +327,14 @@ contains
     real(dp), allocatable :: v(:)
     v = this%con%c
   end function gap_rhs
+
+  !> Replace c (owned rows): a load history moves the prescribed values and
+  !> the obstacle (the rows stay).
+  subroutine set_gap_rhs(this, c)
+    class(b_operator_t), intent(inout) :: this
+    real(dp), intent(in) :: c(:)
+    this%con%c(1:this%con%n_own) = c(1:this%con%n_own)
+  end subroutine set_gap_rhs
 
   !> Node gid of each owned row.
   function row_node_gid(this) result(v)

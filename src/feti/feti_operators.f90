@@ -26,6 +26,7 @@ module feti_operators
   use coarse_problem, only: coarse_problem_t
   use orthonormal_coarse, only: orthonormal_coarse_t
   use dual_preconditioner, only: dual_preconditioner_t
+  use constraints, only: row_dirichlet, row_contact
   use mpi_f08, only: MPI_Comm, MPI_Allreduce, MPI_SUM, MPI_MIN, MPI_IN_PLACE, MPI_INTEGER
   implicit none
   private
@@ -79,6 +80,9 @@ module feti_operators
     !> the local solver asked of f_operator ('dense' | 'block' | 'subdomain'; `&solver local_solver`,
     !> resolved by params::local_solver_for; classes of congruent subdomains override it)
     character(len=10) :: solver_used = ''
+    !> a load history (set_load): f (concatenated) and c of the set-up, the
+    !> load factor 1 and the obstacle where the input puts it
+    real(dp), allocatable :: f_unit(:), c_unit(:)
   contains
     procedure :: setup
     procedure :: apply_f
@@ -139,6 +143,8 @@ module feti_operators
     procedure :: coarse_factor
     procedure :: dirichlet_fixes_rigid_modes
     procedure :: hybrid_units
+    procedure :: set_load
+    procedure :: settle_f_action
     procedure :: free
   end type feti_t
 
@@ -632,6 +638,62 @@ contains
     hybrid_units = this%hybrid
   end function hybrid_units
 
+  !> The right-hand sides of a step of a load history: f and the prescribed
+  !> displacements (Dirichlet values of c) of the set-up times `factor`, the
+  !> obstacle moved by `gap_shift` (contact values of c), then d = B K^+ f - c,
+  !> e = R^T f, lambda~ = G^T (G G^T)^{-1} e and the bounds, as the set-up
+  !> forms them. Every operator stays. Collective.
+  subroutine set_load(this, factor, gap_shift)
+    class(feti_t), intent(inout) :: this
+    real(dp), intent(in) :: factor, gap_shift
+    integer(ip) :: ls, r(2)
+    integer(ip), allocatable :: kind(:)
+    real(dp), allocatable :: c(:), unit(:), z(:)
+    if (.not. allocated(this%f_unit)) then
+      allocate (this%f_unit(size(this%xall)))
+      do ls = 1, this%n_local_subs
+        r = this%b%dof_range(ls)
+        this%f_unit(r(1):r(2)) = this%subs(ls)%f
+      end do
+      this%c_unit = this%b%gap_rhs()
+    end if
+    kind = this%b%row_kind()
+    unit = this%b%row_units()
+    c = this%c_unit
+    where (kind == row_dirichlet) c = factor*this%c_unit
+    where (kind == row_contact) c = this%c_unit + gap_shift*unit
+    call this%b%set_gap_rhs(c)
+    do ls = 1, this%n_local_subs
+      r = this%b%dof_range(ls)
+      this%subs(ls)%f = factor*this%f_unit(r(1):r(2))
+      this%xall(r(1):r(2)) = this%subs(ls)%f
+      this%e(6*ls - 5:6*ls) = matmul(this%subs(ls)%f, this%subs(ls)%R)
+    end do
+    call this%f%local_solve(this%xall)
+    call this%b%apply_concat(this%xall, this%d)
+    this%d = this%d - c
+    allocate (z(6*this%n_local_subs))
+    call this%proj%solve(this%e, z)
+    call this%b%apply_gt(z, this%lambda_tilde)
+    this%lower = -huge(1.0_dp)
+    where (this%contact) this%lower = -this%lambda_tilde
+  end subroutine set_load
+
+  !> `&solver f_action = 'auto'` with a deferred build pending: build the
+  !> explicit local operators now, so that every later solve (a step of a
+  !> history, or one after a restart) sees the same F whatever it follows.
+  !> Collective.
+  subroutine settle_f_action(this)
+    class(feti_t), intent(inout) :: this
+    if (this%f_build_at <= 0) return
+    call timer_start('explicit F')
+    call this%f%build_explicit(this%b, this%subs, this%f_regularization, this%f_storage)
+    call timer_stop('explicit F')
+    this%f_built_after = this%f%n_applications()
+    this%f_build_at = 0
+    call log_message("F action 'auto': explicit local operators built before the load history")
+  end subroutine settle_f_action
+
   subroutine free(this)
     class(feti_t), intent(inout) :: this
     call this%f%free()
@@ -640,6 +702,7 @@ contains
     if (allocated(this%subs)) deallocate (this%subs)
     if (allocated(this%d)) deallocate (this%d, this%lambda_tilde, this%lower, this%contact, this%e)
     if (allocated(this%xall)) deallocate (this%xall)
+    if (allocated(this%f_unit)) deallocate (this%f_unit, this%c_unit)
     this%n_local_subs = 0
     this%pfp_norm = 0
     if (allocated(this%lz_v)) deallocate (this%lz_v, this%lz_vold, this%lz_alpha, this%lz_beta)

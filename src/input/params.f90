@@ -15,6 +15,7 @@ module params
   use mesh_settings, only: mesh_settings_t
   use materials, only: material_settings_t
   use assembly, only: load_settings_t
+  use history_settings, only: history_settings_t
   implicit none
   private
 
@@ -92,14 +93,13 @@ module params
     logical :: write_report = .true.          !< report.json
   end type output_params_t
 
-  integer, parameter :: max_values = 3      !< the most values of one variable (arrays of 3)
 
   !> One variable of a group as the namelist writes it (param_items).
   type, public :: param_item_t
     character(len=name_len) :: name = ''                !< lower case
     character :: kind = 'i'                             !< 'i' integer, 'r' real, 'l' logical (T/F), 's' string
     integer :: n = 0                                    !< number of values (> 1: an array)
-    character(len=path_len) :: values(max_values) = ''  !< the values as text
+    character(len=path_len), allocatable :: values(:)   !< the values as text (n of them)
   end type param_item_t
 
   !> All parameters of a run.
@@ -113,11 +113,12 @@ module params
     type(solver_params_t) :: solver
     type(reconstruction_params_t) :: reconstruction
     type(output_params_t) :: output
+    type(history_settings_t) :: history
   end type params_t
 
   !> The namelist groups, in the order of the echo and of report.json.
-  character(len=*), parameter :: group_names(8) = [character(len=14) :: 'mesh', 'material', &
-    'load', 'boundary', 'obstacle', 'solver', 'reconstruction', 'output']
+  character(len=*), parameter :: group_names(9) = [character(len=14) :: 'mesh', 'material', &
+    'load', 'boundary', 'obstacle', 'solver', 'reconstruction', 'output', 'history']
 
 contains
 
@@ -184,7 +185,7 @@ contains
         status = 1
         msg = 'file '//trim(file)//': unknown namelist group &'//name// &
               '; allowed groups: &mesh, &material, &load, &boundary, &obstacle, &solver, '// &
-              '&reconstruction, &output'
+              '&reconstruction, &output, &history'
         return
       end if
       if (seen(i)) then
@@ -592,6 +593,10 @@ contains
       if (reading) call p%load%read_namelist(group_text, status, msg)
       if (.not. reading) call p%load%write_namelist(written, status, msg)
       return
+    case ('history')
+      if (reading) call p%history%read_namelist(group_text, status, msg)
+      if (.not. reading) call p%history%write_namelist(written, status, msg)
+      return
     case ('boundary')
       top_dirichlet = p%boundary%top_dirichlet; top_displacement = p%boundary%top_displacement
       symmetry_x0 = p%boundary%symmetry_x0; symmetry_y0 = p%boundary%symmetry_y0
@@ -772,6 +777,8 @@ contains
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
     character(len=:), allocatable :: variable, rule, got
+    real(dp), allocatable :: step_gaps(:)
+    integer(ip) :: k
 
     status = 0
     msg = ''
@@ -860,6 +867,18 @@ contains
         call fail('solver', 'preconditioner_switch', 'must be > 1 (a condition number)', &
                   reals([s%preconditioner_switch]))
     end associate
+    call p%history%check(variable, rule, got)
+    if (len(variable) > 0) call fail('history', variable, rule, got)
+    if (status == 0) then
+      associate (h => p%history)
+        step_gaps = [(h%gap(k, p%obstacle%gap), k = 1, h%nsteps)]
+        if (any(step_gaps /= p%obstacle%gap) .and. p%obstacle%shape == 'none') &
+          call fail('history', 'gaps', "moves the obstacle, but &obstacle shape = 'none'", reals(step_gaps(1:1)))
+        if (p%obstacle%shape /= 'none' .and. minval(step_gaps) < -max_penetration*p%mesh%lengths(3)) &
+          call fail('history', 'gaps', 'the obstacle must not be deeper inside the body than 0.1 times '// &
+                    'its height &mesh lengths(3) at any step', reals([minval(step_gaps)]))
+      end associate
+    end if
     associate (r => p%reconstruction)
       if (.not. one_of(r%method, [character(len=8) :: 'new', 'standard', 'both'])) &
         call fail('reconstruction', 'method', "must be 'new', 'standard' or 'both'", r%method)
@@ -1020,7 +1039,7 @@ contains
     type(params_t) :: copy
     integer :: status, k
     character(len=msg_len) :: msg
-    allocate (character(len=path_len + 64) :: lines(64))
+    allocate (character(len=path_len + 64) :: lines(300))
     copy = p
     call group_namelist(name, copy, status, msg, written=lines)
     if (status /= 0) call fatal_error('params: cannot write group &'//name//': '//trim(msg))
@@ -1076,9 +1095,10 @@ contains
             item%kind = 'i'
           end if
         end if
+        if (.not. allocated(item%values)) allocate (item%values(0))
         do k = 1, repeat
           item%n = item%n + 1
-          item%values(item%n) = token
+          item%values = [character(len=path_len) :: item%values, token]
         end do
         i = next_nonblank(text, i)
         if (i <= len(text)) then

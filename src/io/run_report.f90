@@ -26,7 +26,7 @@ contains
   !> Write <p%output%directory>/report.json. `seconds`: the solve and, within
   !> it, the F actions and the coarse solves (tfeti_dualization%solve);
   !> `stats`: the reduced timers. Collective.
-  subroutine write_run_report(p, dual, solver, sol, contact, stats, seconds)
+  subroutine write_run_report(p, dual, solver, sol, contact, stats, seconds, history)
     type(params_t), intent(in) :: p
     type(tfeti_dualization_t), intent(inout), target :: dual
     type(smalbe_t), intent(in) :: solver
@@ -34,6 +34,9 @@ contains
     type(contact_summary_t), intent(in) :: contact
     type(timer_stat_t), intent(in) :: stats(:)
     real(dp), intent(in) :: seconds(3)
+    !> a load history: its step records (a JSON array), report.json's `history`;
+    !> the other sections are those of the last step
+    character(len=*), intent(in), optional :: history
     type(json_writer_t) :: js
     type(feti_t), pointer :: op
     type(coarse_problem_t), pointer :: cp
@@ -117,6 +120,7 @@ contains
     call js%add('contact_radius', contact%contact_radius)
     call js%end_object()
     call js%add_raw('memory', memory)
+    if (present(history)) call js%add_raw('history', history)
     cp => op%coarse_factor()
     block
       call js%begin_object('coarse')

@@ -12,12 +12,12 @@
 !> Shapes are written as HDF5 (C order) sees them; the Fortran arrays are the
 !> transposes, e.g. coordinates(3, nnodes).
 module xdmf
-  use kinds, only: i8
+  use kinds, only: i8, dp
   use text, only: str
   implicit none
   private
 
-  public :: write_xdmf
+  public :: write_xdmf, write_xdmf_series
 
 contains
 
@@ -67,6 +67,67 @@ contains
     if (status /= 0) return
     close (u, iostat=status, iomsg=msg)
   end subroutine write_xdmf
+
+  !> Write the temporal XDMF file `path` of a series of HDF5 files
+  !> `h5_names(k)` (names relative to the directory of `path`, each as
+  !> write_xdmf describes it) at times `times(k)`: one Temporal collection
+  !> whose members (a Spatial collection of "mesh" and "contact" each) are
+  !> the steps, which ParaView shows on its time slider.
+  subroutine write_xdmf_series(path, h5_names, times, nnodes, nelem, ncontact, status, msg)
+    character(len=*), intent(in) :: path, h5_names(:)
+    real(dp), intent(in) :: times(:)
+    integer(i8), intent(in) :: nnodes, nelem, ncontact
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    character(len=:), allocatable :: h5
+    character(len=32) :: t
+    integer :: u, k
+
+    msg = ''
+    open (newunit=u, file=path, status='replace', action='write', iostat=status, iomsg=msg)
+    if (status /= 0) return
+    write (u, '(a)', iostat=status, iomsg=msg) '<?xml version="1.0" ?>', &
+      '<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>', &
+      '<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">', &
+      '  <Domain>', &
+      '    <Grid Name="history" GridType="Collection" CollectionType="Temporal">'
+    do k = 1, size(h5_names)
+      if (status /= 0) return
+      h5 = xml_escape(trim(h5_names(k)))
+      write (t, '(es23.15e3)') times(k)
+      write (u, '(a)', iostat=status, iomsg=msg) &
+        '    <Grid Name="step'//str(int(k, i8))//'" GridType="Collection" CollectionType="Spatial">', &
+        '      <Time Value="'//trim(adjustl(t))//'" />', &
+        '    <Grid Name="mesh" GridType="Uniform">', &
+        '      <Topology TopologyType="Hexahedron" NumberOfElements="'//str(nelem)//'" NodesPerElement="8">', &
+        data_item(h5, 'connectivity', nelem, 8, 'Int', 4), &
+        '      </Topology>', &
+        geometry(h5, 'coordinates', nnodes), &
+        attribute(h5, 'displacement', 'Vector', 'Node', nnodes, 3, 'Float', 8), &
+        attribute(h5, 'subdomain', 'Scalar', 'Cell', nelem, 0, 'Int', 4), &
+        attribute(h5, 'von_mises', 'Scalar', 'Cell', nelem, 0, 'Float', 8), &
+        '    </Grid>'
+      if (status /= 0) return
+      if (ncontact > 0) then
+        write (u, '(a)', iostat=status, iomsg=msg) &
+          '    <Grid Name="contact" GridType="Uniform">', &
+          '      <Topology TopologyType="Polyvertex" NumberOfElements="'//str(ncontact)// &
+          '" NodesPerElement="1">', &
+          data_item(h5, 'contact_vertices', ncontact, 0, 'Int', 4), &
+          '      </Topology>', &
+          geometry(h5, 'contact_coordinates', ncontact), &
+          attribute(h5, 'contact_pressure', 'Scalar', 'Node', ncontact, 0, 'Float', 8), &
+          attribute(h5, 'contact_gap', 'Scalar', 'Node', ncontact, 0, 'Float', 8), &
+          '    </Grid>'
+      end if
+      if (status /= 0) return
+      write (u, '(a)', iostat=status, iomsg=msg) '    </Grid>'
+    end do
+    if (status /= 0) return
+    write (u, '(a)', iostat=status, iomsg=msg) '    </Grid>', '  </Domain>', '</Xdmf>'
+    if (status /= 0) return
+    close (u, iostat=status, iomsg=msg)
+  end subroutine write_xdmf_series
 
   !> The Geometry element (XYZ) from dataset /`name` of `rows` x 3.
   function geometry(h5, name, rows) result(lines)

@@ -104,6 +104,9 @@ module active_set_polish
     integer(ip) :: n_predicted = 0             !< rows made active by the prediction in all
     integer(ip) :: n_forced = 0                !< SMALBE inner solves whose bound was cut to force a step
     logical :: polished_first = .false.        !< the last solve started with a polish that was not given up
+    !> the next first_face starts from the face of the given x (its free rows: a warm start),
+    !> not from every bounded row at its bound; first_face clears it
+    logical :: warm_face = .false.
     logical, allocatable :: free_now(:)        !< the free rows of the current x
     logical, allocatable, private :: free_prev(:)
     real(dp), allocatable, private :: x_prev(:), g_prev(:), muhat_prev(:)   !< the pair to go back to
@@ -271,11 +274,20 @@ contains
     integer(ip) :: n
     ran = .false.
     restored = .false.
+    if (.not. (self%active .and. self%settings%first .and. problem%face_always_regular() .and. max_hessian > 2)) &
+      self%warm_face = .false.
     if (.not. (self%active .and. self%settings%first .and. problem%face_always_regular() .and. max_hessian > 2)) return
     ran = .true.
     n = problem%n
-    if (self%monitor) call log_message('polish first: the face with every contact row at its bound')
-    self%free_now(1:n) = .not. problem%lower(1:n) > no_lower_bound
+    if (self%warm_face) then
+      ! a warm start: its own face (rows above their bound stay free)
+      if (self%monitor) call log_message('polish first: the face of the warm start')
+      self%free_now(1:n) = .not. problem%lower(1:n) > no_lower_bound .or. x(1:n) > problem%lower(1:n)
+    else
+      if (self%monitor) call log_message('polish first: the face with every contact row at its bound')
+      self%free_now(1:n) = .not. problem%lower(1:n) > no_lower_bound
+    end if
+    self%warm_face = .false.
     x(1:n) = merge(x(1:n), problem%lower(1:n), self%free_now(1:n))
     g(1:n) = 0
     call self%polish(problem, x, 0_ip, g, muhat, b_lin, ct_mu, tol_gp, per_component, n_hessian, max_hessian, &

@@ -172,6 +172,9 @@ module smalbe
     integer(ip) :: n_rho_updates = 0           !< times rho was raised
     ! results of the last solve
     real(dp), allocatable :: muhat(:)          !< final multiplier, hat form (C^T mu = eq_apply_t(muhat))
+    !> when allocated with eq_size entries, the next solve starts from this
+    !> multiplier instead of 0 (and deallocates it): a warm start
+    real(dp), allocatable :: muhat_start(:)
     real(dp) :: cnorm = 0                      !< ||C x|| at the returned x
     real(dp) :: lagrangian = 0                 !< L(x, mu) at the returned pair
     real(dp) :: rho = 0                        !< problem%penalty()
@@ -492,7 +495,8 @@ contains
   end function smalbe_is_compatible
 
 
-  !> Solve from x (projected onto the bounds first); muhat starts at 0.
+  !> Solve from x (projected onto the bounds first); muhat starts at 0, or at
+  !> muhat_start when that is set.
   !> On return: x, muhat, gradient = A x - b + C^T mu, gp_norm, cnorm,
   !> lagrangian belong to the same pair (x_k, mu_k); status and message say
   !> whether tol was met. The steps 1-6 of the module.
@@ -576,6 +580,8 @@ contains
     call ensure_size(self%muhat, m)
     call ensure_size(self%rule%z, m)
     call self%polish%start(problem, n, self%monitor)
+    ! a warm start (muhat_start): the polish first starts from the face of x
+    self%polish%warm_face = allocated(self%muhat_start)
 
     self%rho = problem%penalty()
     self%rho_initial = self%rho
@@ -611,6 +617,15 @@ contains
     self%muhat = 0
     self%ct_mu = 0
     self%b_lin(1:n) = problem%b(1:n)
+    if (allocated(self%muhat_start)) then
+      ! a warm start (a load history): the multiplier of the previous solve
+      if (size(self%muhat_start) == m) then
+        self%muhat = self%muhat_start
+        call problem%eq_apply_t(self%muhat, self%ct_mu)
+        self%b_lin(1:n) = problem%b(1:n) - self%ct_mu(1:n)
+      end if
+      deallocate (self%muhat_start)
+    end if
     self%rule%tol_gp = self%tol_gp
     self%rule%tol_c = self%tol_c
     self%rule%per_component = self%per_component

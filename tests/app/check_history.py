@@ -1,0 +1,318 @@
+#!/usr/bin/python3
+"""End-to-end checks of a load history (&history, docs/INPUT.md).
+
+    check_history.py --program BIN --mpiexec MPIEXEC --workdir DIR CHECK [--ranks N]
+
+CHECK is one of
+  steps     a loading and unloading history on a small cube: every step's
+            displacements (HDF5) and contact force equal those of a separate
+            one-step run at the same load (top displacement scaled by the
+            step's factor, obstacle at the step's gap) to a bound derived
+            from the solver tolerance; the history is warm started, the
+            separate runs are cold.
+  restart   a history stopped after a step (time_limit) and continued with
+            restart = .true. gives the same report records (all but times)
+            and bit-identical HDF5 fields as an uninterrupted one.
+  bad       bad history input and bad checkpoints: exit status 2 and a
+            message naming the group and variable (or the checkpoint).
+  signal    SIGUSR1 to mpirun (forwarded to the ranks; SIGTERM under a batch
+            system) stops a long history after the step under way, with its
+            checkpoint; restart = .true. continues with the next step to the end.
+  paraview  ParaView (pvpython, Debian's python3-paraview, under xvfb-run)
+            opens the temporal XDMF and steps through every time; exit 77
+            (skipped) when pvpython is absent.
+"""
+import argparse
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+
+SKIP = 77
+TOL = 1e-9
+# displacements: the solver stops when the constraint violation is below
+# tol times the data's displacements; the primal error follows through the
+# condition of the stiffness (a few hundred here): 1e3 tol relative to max |u|.
+U_BOUND = 1e3 * TOL
+# the contact force is the sum of the multipliers: the same bound, relative.
+F_BOUND = 1e3 * TOL
+
+BASE = """&mesh nsub = 2, 2, 2, nel = 4, 4, 4 /
+&material young = 2.1e5, poisson = 0.3 /
+&boundary top_dirichlet = .true., top_displacement = 0.0, 0.0, {uz!r} /
+&obstacle shape = 'sphere', radius = 1.0, gap = {gap!r} /
+&solver tol = {tol!r} /
+&output directory = '{out}', run_name = 'run' /
+"""
+
+TOP_UZ = -0.02
+
+
+def write_input(path, uz, gap, out, history=''):
+    with open(path, 'w') as f:
+        f.write(BASE.format(uz=uz, gap=gap, tol=TOL, out=out))
+        f.write(history)
+
+
+def run(args, nml, ranks=None, expect=0):
+    ranks = ranks or args.ranks
+    cmd = [args.mpiexec, '-n', str(ranks), args.program, nml]
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    if expect is not None and p.returncode != expect:
+        sys.stdout.write(p.stdout[-4000:])
+        sys.stderr.write(p.stderr[-4000:])
+        raise SystemExit('%s: exit %d, expected %d' % (nml, p.returncode, expect))
+    return p
+
+
+def read_h5(path):
+    import h5py
+    with h5py.File(path, 'r') as f:
+        return {k: np.array(f[k]) for k in f.keys()}
+
+
+def fresh(d):
+    shutil.rmtree(d, ignore_errors=True)
+    os.makedirs(d)
+    return d
+
+
+def check_steps(args):
+    work = fresh(os.path.join(args.workdir, 'steps'))
+    hist_out = os.path.join(work, 'history')
+    # 6 steps: factors 1/3, 2/3, 1, 3/4, 1/2, 1/4; the obstacle moves on the way down
+    gaps = [0.0, 0.0, 0.0, 0.001, 0.002, 0.002]
+    history = "&history nsteps = 6, path = 'load_unload', gaps = %s /\n" % ', '.join(repr(g) for g in gaps)
+    nml = os.path.join(work, 'history.nml')
+    write_input(nml, TOP_UZ, 0.0, hist_out, history)
+    run(args, nml)
+    rep = json.load(open(os.path.join(hist_out, 'report.json')))
+    steps = rep['history']
+    assert len(steps) == 6, 'history records: %d' % len(steps)
+    factors = [1 / 3, 2 / 3, 1.0, 0.75, 0.5, 0.25]
+    worst_u = worst_f = 0.0
+    for k, rec in enumerate(steps, start=1):
+        assert abs(rec['load_factor'] - factors[k - 1]) < 1e-15, rec['load_factor']
+        assert rec['kkt_passed'] and rec['converged'], rec
+        assert (rec['warm_start'] != 'cold') == (k > 1), rec
+        single_out = os.path.join(work, 'single%d' % k)
+        snml = os.path.join(work, 'single%d.nml' % k)
+        write_input(snml, TOP_UZ * factors[k - 1], gaps[k - 1], single_out)
+        run(args, snml)
+        srep = json.load(open(os.path.join(single_out, 'report.json')))
+        uh = read_h5(os.path.join(hist_out, 'run_step%04d.h5' % k))['displacement']
+        us = read_h5(os.path.join(single_out, 'run.h5'))['displacement']
+        du = np.max(np.abs(uh - us)) / np.max(np.abs(us))
+        fs = srep['contact']['total_force']
+        df = abs(rec['total_force'] - fs) / max(abs(fs), 1e-300)
+        worst_u, worst_f = max(worst_u, du), max(worst_f, df)
+        print('step %d factor %.4f gap %.4f: |du|/|u| %.2e, |dF|/|F| %.2e, Hessian %d (history) %d (single)'
+              % (k, rec['load_factor'], rec['gap'], du, df, rec['hessian_multiplications'],
+                 srep['solver']['hessian_multiplications']))
+        assert du <= U_BOUND, 'step %d: displacements differ by %.3e > %.1e' % (k, du, U_BOUND)
+        assert df <= F_BOUND, 'step %d: contact force differs by %.3e > %.1e' % (k, df, F_BOUND)
+    # the loads differ: a history that solved one load only would fail above; make sure the
+    # forces really change along the path (loading up, unloading down)
+    forces = [r['total_force'] for r in steps]
+    assert forces[0] < forces[1] < forces[2] and forces[2] > forces[3] > forces[4] > forces[5], forces
+    print('steps: worst |du|/|u| %.2e (bound %.1e), |dF|/|F| %.2e (bound %.1e)' % (worst_u, U_BOUND, worst_f, F_BOUND))
+
+
+def strip_times(records):
+    out = []
+    for r in records:
+        r = dict(r)
+        r.pop('seconds', None)
+        out.append(r)
+    return out
+
+
+def check_restart(args):
+    work = fresh(os.path.join(args.workdir, 'restart_np%d' % args.ranks))
+    full_out = os.path.join(work, 'full')
+    part_out = os.path.join(work, 'part')
+    hist = "&history nsteps = 5, path = 'load_unload'%s /\n"
+    nml = os.path.join(work, 'full.nml')
+    write_input(nml, TOP_UZ, 0.0, full_out, hist % '')
+    run(args, nml)
+    # stopped after step 1 by the time limit (any step takes longer than 1e-9 s), restarted
+    # twice (after step 2, then to the end)
+    nml1 = os.path.join(work, 'part1.nml')
+    write_input(nml1, TOP_UZ, 0.0, part_out, hist % ', time_limit = 1e-9')
+    p = run(args, nml1)
+    assert 'stopped after step 1 of 5' in p.stdout, p.stdout[-2000:]
+    p = run(args, _restart_input(work, part_out, hist, '1e-9'))
+    assert 'restart after step 1 of 5' in p.stdout and 'stopped after step 2 of 5' in p.stdout, p.stdout[-2000:]
+    p = run(args, _restart_input(work, part_out, hist, '0'))
+    assert 'restart after step 2 of 5' in p.stdout, p.stdout[-2000:]
+    full = json.load(open(os.path.join(full_out, 'report.json')))
+    part = json.load(open(os.path.join(part_out, 'report.json')))
+    a, b = strip_times(full['history']), strip_times(part['history'])
+    assert len(a) == len(b) == 5, (len(a), len(b))
+    for ra, rb in zip(a, b):
+        # warm_start and everything else: the restarted steps start from the checkpoint
+        assert ra == rb, 'record differs:\n%s\n%s' % (ra, rb)
+    for k in range(1, 6):
+        fa = read_h5(os.path.join(full_out, 'run_step%04d.h5' % k))
+        fb = read_h5(os.path.join(part_out, 'run_step%04d.h5' % k))
+        assert fa.keys() == fb.keys()
+        for key in fa:
+            assert np.array_equal(fa[key], fb[key]), 'step %d dataset %s differs' % (k, key)
+    print('restart on %d ranks: 5 records and every dataset of 5 steps bit-identical' % args.ranks)
+
+
+def _restart_input(work, out, hist, limit):
+    path = os.path.join(work, 'restart_%s.nml' % limit.replace('-', 'm'))
+    extra = ', restart = .true.'
+    if limit != '0':
+        extra += ', time_limit = %s' % limit
+    write_input(path, TOP_UZ, 0.0, out, hist % extra)
+    return path
+
+
+def expect_error(args, nml, pattern):
+    p = run(args, nml, expect=2)
+    text = p.stdout + p.stderr
+    assert re.search(pattern, text), 'no message matching %r in:\n%s' % (pattern, text[-2000:])
+
+
+def check_bad(args):
+    work = fresh(os.path.join(args.workdir, 'bad'))
+    out = os.path.join(work, 'out')
+    cases = [
+        ('&history nsteps = 0 /', r'group &history, variable nsteps: must be in \[1, 1000\]'),
+        ("&history nsteps = 3, path = 'zigzag' /",
+         r"group &history, variable path: must be 'ramp', 'load_unload' or 'list'"),
+        ("&history nsteps = 3, path = 'list', load_factors = 0.5, 1.0 /",
+         r"group &history, variable load_factors: needs nsteps values"),
+        ("&history nsteps = 2, load_factors = 0.5, 1.0 /",
+         r"group &history, variable load_factors: is for path = 'list' only"),
+        ("&history nsteps = 2, path = 'list', load_factors = 0.5, -1.0 /",
+         r"group &history, variable load_factors: each factor must be > 0"),
+        ("&history nsteps = 3, gaps = 0.0, 0.1 /", r"group &history, variable gaps: needs exactly nsteps values"),
+        ("&history nsteps = 2, gaps = 0.0, -0.5 /", r"group &history, variable gaps: the obstacle must not be deeper"),
+        ('&history nsteps = 2, factor_peak = 0 /', r'group &history, variable factor_peak: must be > 0'),
+        ('&history nsteps = 2, time_limit = -1 /', r'group &history, variable time_limit: must be >= 0'),
+        ('&history nsteps = 2, speed = 1 /', r'group &history: variable speed: not a variable of this group'),
+    ]
+    for k, (group, pattern) in enumerate(cases):
+        nml = os.path.join(work, 'bad%d.nml' % k)
+        write_input(nml, TOP_UZ, 0.0, out, group + '\n')
+        expect_error(args, nml, pattern)
+    # restart without a checkpoint
+    nml = os.path.join(work, 'nockpt.nml')
+    write_input(nml, TOP_UZ, 0.0, os.path.join(work, 'empty'), "&history nsteps = 2, restart = .true. /\n")
+    expect_error(args, nml, r'&history restart: checkpoint .*does not exist')
+    # a checkpoint of another input (another top displacement) is foreign
+    nml = os.path.join(work, 'first.nml')
+    write_input(nml, TOP_UZ, 0.0, out, "&history nsteps = 3, time_limit = 1e-9 /\n")
+    run(args, nml)
+    nml = os.path.join(work, 'foreign.nml')
+    write_input(nml, TOP_UZ / 2, 0.0, out, "&history nsteps = 3, restart = .true. /\n")
+    expect_error(args, nml, r'&history restart: checkpoint .*belongs to another input or mesh')
+    # a damaged checkpoint (not a checkpoint at all)
+    with open(os.path.join(out, 'run.checkpoint.0'), 'wb') as f:
+        f.write(b'garbage')
+    nml = os.path.join(work, 'damaged.nml')
+    write_input(nml, TOP_UZ, 0.0, out, "&history nsteps = 3, restart = .true. /\n")
+    expect_error(args, nml, r'&history restart: checkpoint .*is not a feticontact history checkpoint')
+    print('bad: %d input errors and 3 checkpoint errors refused with exit 2' % len(cases))
+
+
+def check_signal(args):
+    import signal
+    import time
+    work = fresh(os.path.join(args.workdir, 'signal'))
+    out = os.path.join(work, 'out')
+    nml = os.path.join(work, 'h.nml')
+    hist = "&history nsteps = 200, path = 'ramp'%s /\n"
+    write_input(nml, TOP_UZ, 0.0, out, hist % '')
+    log = os.path.join(work, 'log.txt')
+    with open(log, 'w') as f:
+        p = subprocess.Popen([args.mpiexec, '-n', str(args.ranks), args.program, nml], stdout=f,
+                             stderr=subprocess.STDOUT)
+        t0 = time.time()
+        while time.time() - t0 < 600:
+            time.sleep(0.5)
+            if re.search(r'^step 2/200', open(log).read(), re.M) or p.poll() is not None:
+                break
+        p.send_signal(signal.SIGUSR1)
+        rc = p.wait(timeout=600)
+    text = open(log).read()
+    m = re.search(r'stopped after step (\d+) of 200 \(stop signal\)', text)
+    assert rc == 0 and m, 'exit %d, log:\n%s' % (rc, text[-3000:])
+    k = int(m.group(1))
+    assert k < 200, k
+    nml2 = os.path.join(work, 'restart.nml')
+    write_input(nml2, TOP_UZ, 0.0, out, hist % ', restart = .true.')
+    r = run(args, nml2)
+    assert 'restart after step %d of 200' % k in r.stdout, r.stdout[-2000:]
+    rep = json.load(open(os.path.join(out, 'report.json')))
+    assert [s['step'] for s in rep['history']] == list(range(1, 201))
+    print('signal: stopped after step %d of 200, restarted and finished' % k)
+
+
+PV_SCRIPT = r"""
+import sys
+from paraview.simple import XDMFReader, UpdatePipeline, servermanager
+r = XDMFReader(FileNames=[sys.argv[1]])
+times = list(r.TimestepValues)
+assert len(times) == int(sys.argv[2]), times
+maxima = []
+for t in times:
+    UpdatePipeline(time=t, proxy=r)
+    data = servermanager.Fetch(r)
+    block = data.GetBlock(0)
+    while block is not None and not hasattr(block, 'GetPointData'):
+        block = block.GetBlock(0)
+    u = block.GetPointData().GetArray('displacement')
+    maxima.append(max(abs(u.GetRange(2)[0]), abs(u.GetRange(2)[1])))
+print('times', times)
+print('max |u_z|', maxima)
+assert len(set(maxima)) == len(maxima), 'the steps show the same field'
+"""
+
+
+def check_paraview(args):
+    pv = shutil.which('pvpython')
+    xvfb = shutil.which('xvfb-run')
+    if pv is None:
+        print('pvpython not found (Debian: python3-paraview): skipped')
+        return SKIP
+    work = fresh(os.path.join(args.workdir, 'paraview'))
+    out = os.path.join(work, 'out')
+    nml = os.path.join(work, 'h.nml')
+    write_input(nml, TOP_UZ, 0.0, out, "&history nsteps = 3 /\n")
+    run(args, nml)
+    script = os.path.join(work, 'steps.py')
+    with open(script, 'w') as f:
+        f.write(PV_SCRIPT)
+    cmd = ([xvfb, '-a'] if xvfb else []) + [pv, script, os.path.join(out, 'run.xdmf'), '3']
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    sys.stdout.write(p.stdout)
+    if p.returncode != 0:
+        sys.stderr.write(p.stderr[-4000:])
+        raise SystemExit('pvpython failed on the temporal XDMF')
+    return 0
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument('--program', required=True)
+    ap.add_argument('--mpiexec', default='mpirun')
+    ap.add_argument('--ranks', type=int, default=2)
+    ap.add_argument('--workdir', required=True)
+    ap.add_argument('check', choices=['steps', 'restart', 'bad', 'signal', 'paraview'])
+    args = ap.parse_args()
+    os.makedirs(args.workdir, exist_ok=True)
+    status = {'steps': check_steps, 'restart': check_restart, 'bad': check_bad,
+              'signal': check_signal, 'paraview': check_paraview}[args.check](args)
+    return status or 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
