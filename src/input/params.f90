@@ -9,7 +9,7 @@
 !> Every variable is documented in docs/INPUT.md.
 module params
   use kinds, only: dp, ip, i8, path_len, name_len
-  use errors, only: collective_error, exit_input_error, fatal_error
+  use errors, only: collective_error, exit_input_error, fatal_error, set_input_file
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast, MPI_BYTE, MPI_INTEGER, MPI_CHARACTER
   use smalbe, only: smalbe_settings_t
   use mesh_settings, only: mesh_settings_t
@@ -138,6 +138,7 @@ contains
 
     call MPI_Comm_rank(comm, rank, ierr)
     call MPI_Comm_size(comm, nranks, ierr)
+    call set_input_file(file)       ! the refusals at run time name it too
     status = 0
     msg = ''
     p = params_t()
@@ -482,8 +483,12 @@ contains
     if (i == 0) return
     unknown = lower(trim(adjustl(iomsg(i + 33:))))
     unknown = unknown(max(1, verify(unknown, achar(39)//achar(34))):)
-    if (index(unknown, variable) == 1 .or. len(variable) == 0) &
+    if (index(unknown, variable) == 1 .or. len(variable) == 0) then
       text = 'not a variable of this group (see docs/INPUT.md for the allowed ones)'
+    else
+      ! gfortran reads an unquoted string as the name of the next variable
+      text = "a string value needs quotes: "//variable//" = '"//trim(unknown)//"'"
+    end if
   end function describe
 
   !> Positions in `body` where an assignment 'name[(...)] =' starts.
