@@ -376,13 +376,14 @@ contains
     class(active_set_polish_t), intent(in) :: self
     character(len=300) :: buf
     if (self%n_polish == 0) return
-    write (buf, '(a,i0,a,i0,a,i0,a,i0,a,i0,a,i0,a)') '  polish ', self%n_polish, ' times (', self%n_rounds, &
-      ' face solves, ', self%n_steps, ' CG steps, ', self%n_products, ' Hessian multiplications; accepted at once ', &
-      self%n_exact, ', given up ', self%n_aborted, ')'
-    if (self%settings%release) write (buf, '(a,a,i0,a)') trim(buf), ', released ', self%n_released, ' active rows'
-    if (self%n_predicted > 0) write (buf, '(a,a,i0,a)') trim(buf), ', predicted ', self%n_predicted, ' active rows'
-    if (self%n_forced > 0) write (buf, '(a,a,i0,a)') trim(buf), '; ', self%n_forced, &
-      ' inner solves after a polish made to take a step'
+    write (buf, '(9a,i0,a,i0,a)') '  polish: ', counted(self%n_polish, 'polish', 'polishes'), ' (', &
+      counted(self%n_rounds, 'face solve'), ', ', counted(self%n_steps, 'CG step'), ', ', &
+      counted(self%n_products, 'Hessian multiplication'), '; accepted at once ', self%n_exact, ', given up ', &
+      self%n_aborted, ')'
+    if (self%settings%release) buf = trim(buf)//', released '//counted(self%n_released, 'row')//' from their bound'
+    if (self%n_predicted > 0) buf = trim(buf)//', predicted '//counted(self%n_predicted, 'row')//' at their bound'
+    if (self%n_forced > 0) buf = trim(buf)//'; '//counted(self%n_forced, 'inner solve')// &
+      ' after a polish made to take a step'
     call log_message(buf)
   end subroutine summary
 

@@ -1054,13 +1054,13 @@ contains
       ', expansion fallbacks ', self%n_expansion_fallback, '), ', self%n_hessian - self%polish%n_products, &
       ' Hessian multiplications'
     call log_message(trim(buf))
-    write (buf, '(a,i0,a,i0,a,es10.3,a,es10.3,a,i0,3a,i0)') '  ||C x|| evaluations ', self%n_eq_residual, &
-      ', M cut ', self%n_m_updates, ' times (', self%m_initial, ' -> ', self%m_bound, '; ', self%n_no_step, &
-      ' inner solves without a step, m_no_step = ', trim(self%settings%m_no_step), '), rows at bound ', &
-      self%n_active
+    write (buf, '(a,i0,3a,es10.3,a,es10.3,5a,i0)') '  ||C x|| evaluations ', self%n_eq_residual, &
+      ', M cut ', counted(self%n_m_updates, 'time'), ' (', self%m_initial, ' -> ', self%m_bound, '; ', &
+      counted(self%n_no_step, 'inner solve'), ' without a step, m_no_step = ', trim(self%settings%m_no_step), &
+      '), rows at bound ', self%n_active
     call log_message(trim(buf))
-    write (buf, '(a,es10.3,a,es10.3,a,i0,a)') '  rho ', self%rho_initial, ' -> ', self%rho, ' (raised ', &
-      self%n_rho_updates, ' times)'
+    write (buf, '(a,es10.3,a,es10.3,3a)') '  rho ', self%rho_initial, ' -> ', self%rho, ' (raised ', &
+      counted(self%n_rho_updates, 'time'), ')'
     call log_message(buf)
     if (self%inner%ritz%n_runs > 0) then
       write (buf, '(a,l1,a,i0,a,es10.3,a,es10.3,a,es10.3,a,i0,a,i0)') '  preconditioned ', self%preconditioned, &
