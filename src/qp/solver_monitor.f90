@@ -24,6 +24,7 @@
 module solver_monitor
   use kinds, only: dp, ip
   use logger, only: log_message
+  use text, only: str
   implicit none
   private
 
@@ -53,7 +54,7 @@ module solver_monitor
     procedure :: note
   end type solver_monitor_t
 
-  !> products, loop, step (both left-aligned in character(len=6) and (len=16) variables), measure,
+  !> products, loop, step (both left-aligned in character(len=6) and (len=18) variables), measure,
   !> target, details
   character(len=*), parameter :: line_format = '(i9,2x,a,1x,a,2es11.3,2x,a)'
 
@@ -94,20 +95,18 @@ contains
   subroutine inner_flush(self)
     class(solver_monitor_t), intent(inout) :: self
     character(len=200) :: buf
-    character(len=16) :: step
-    character(len=20) :: outer
+    character(len=:), allocatable :: step
     if (.not. self%on .or. self%run_count == 0) return
     select case (self%run_kind)
     case (step_cg)
-      write (step, '(a,i0,a)') 'cg(', self%run_count, ')'
+      step = 'cg('//str(self%run_count)//')'
     case (step_expansion)
-      write (step, '(a,i0,a)') 'expansion(', self%run_count, ')'
+      step = 'expansion('//str(self%run_count)//')'
     case default
-      write (step, '(a,i0,a)') 'proportioning(', self%run_count, ')'
+      step = 'proportioning('//str(self%run_count)//')'
     end select
-    write (outer, '(a,i0)') 'outer ', self%outer
-    write (buf, line_format) self%base + self%run_products, loop_name('mprgp'), step, self%run_measure, self%run_target, &
-      trim(outer)
+    write (buf, line_format) self%base + self%run_products, loop_name('mprgp'), step_name(step), self%run_measure, &
+      self%run_target, 'outer '//str(self%outer)
     call log_message(trim(buf))
     self%run_kind = step_none
     self%run_count = 0
@@ -119,13 +118,11 @@ contains
     integer(ip), intent(in) :: outer, products, at_bound
     real(dp), intent(in) :: measure, target, feasibility, feasibility_target, rho
     character(len=200) :: buf, details
-    character(len=16) :: step
     if (.not. self%on) return
     call self%inner_flush()
-    write (step, '(i0)') outer
     write (details, '(a,es10.3,a,es10.3,a,es10.3,a,i0)') 'feasibility ', feasibility, ' (target ', &
       feasibility_target, '), rho ', rho, ', at bound ', at_bound
-    write (buf, line_format) products, loop_name('outer'), step, measure, target, trim(details)
+    write (buf, line_format) products, loop_name('outer'), step_name(str(outer)), measure, target, trim(details)
     call log_message(trim(buf))
   end subroutine outer_line
 
@@ -136,10 +133,9 @@ contains
     integer(ip), intent(in) :: step, products
     real(dp), intent(in) :: measure, target
     character(len=200) :: buf
-    character(len=16) :: label
     if (.not. self%on) return
-    write (label, '(i0,a,i0,a,i0)') self%polish, '.', self%round, '.', step
-    write (buf, line_format) self%base + products, loop_name('face'), label, measure, target, ''
+    write (buf, line_format) self%base + products, loop_name('face'), &
+      step_name(str(self%polish)//'.'//str(self%round)//'.'//str(step)), measure, target, ''
     call log_message(trim(buf))
   end subroutine face_step
 
@@ -150,10 +146,9 @@ contains
     real(dp), intent(in) :: measure, target
     character(len=*), intent(in) :: details
     character(len=400) :: buf
-    character(len=16) :: label
     if (.not. self%on) return
-    write (label, '(i0,a,i0)') polish, '.', round
-    write (buf, line_format) products, loop_name('round'), label, measure, target, details
+    write (buf, line_format) products, loop_name('round'), step_name(str(polish)//'.'//str(round)), measure, target, &
+      details
     call log_message(trim(buf))
   end subroutine round_line
 
@@ -172,10 +167,10 @@ contains
     column = name
   end function loop_name
 
-  !> A step's label in its column (left-aligned).
+  !> A step's label in its column (left-aligned; a longer one widens its line).
   pure function step_name(name) result(column)
     character(len=*), intent(in) :: name
-    character(len=16) :: column
+    character(len=max(18, len(name))) :: column
     column = name
   end function step_name
 
