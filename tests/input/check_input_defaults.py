@@ -8,7 +8,9 @@ defaults), parses the settings it echoes, and parses the tables of docs/INPUT.md
 (rows "| `name` | meaning | default | allowed |" under "## &group" headings).
 Fails when a documented default differs from the echoed value, when a documented
 variable is not echoed, or when an echoed variable is not documented: a default
-changed in one place only. The one exception is a variable the program resolves
+changed in one place only. The other pages (`--pages`: docs/*.md, README.md) are
+searched for "`&group variable = value` (the default" and ", the default": each
+such statement must also give the echoed value. The one exception is a variable the program resolves
 at start and echoes resolved (`&mesh cluster`: 0, 0, 0 means "chosen at start").
 Exit status 0 when every check passes.
 """
@@ -62,6 +64,20 @@ def echo_values(text):
     return found
 
 
+def page_defaults(paths):
+    """[(file:line, group, variable, value)] of the statements "`&group var = value` (the default"
+    or "`&group var = value`, the default" in other pages."""
+    found = []
+    pattern = re.compile(r"`&(\w+) (\w+) = ([^`]+)`,? \(?the default")
+    for path in paths:
+        with open(path) as f:
+            for number, line in enumerate(f, 1):
+                for m in pattern.finditer(line):
+                    found.append(("%s:%d" % (os.path.basename(path), number), m.group(1).lower(),
+                                  m.group(2).lower(), m.group(3)))
+    return found
+
+
 def values(text):
     """A default or an echoed value as a list of normalized items: floats, True/False, strings."""
     text = text.strip().strip("`")
@@ -101,6 +117,7 @@ def main():
     ap.add_argument("--mpiexec", required=True)
     ap.add_argument("--docs", required=True)
     ap.add_argument("--workdir", required=True)
+    ap.add_argument("--pages", nargs="*", default=[])
     args = ap.parse_args()
     os.makedirs(args.workdir, exist_ok=True)
     path = os.path.join(args.workdir, "defaults.nml")
@@ -125,6 +142,13 @@ def main():
               % (name, default, echoed[key]))
     for key in sorted(set(echoed) - set(documented)):
         check(False, "&%s %s: echoed by --check, not documented in docs/INPUT.md" % key)
+    for where, group, name, value in page_defaults(args.pages):
+        key = (group, name)
+        if key not in echoed:
+            check(False, "%s: &%s %s is not a variable --check echoes" % (where, group, name))
+        elif key not in RESOLVED_AT_START:
+            check(same(values(value), values(echoed[key])), "%s: '&%s %s = %s, the default', --check echoes %s"
+                  % (where, group, name, value, echoed[key]))
     print("%d failed" % len(FAILURES))
     sys.exit(1 if FAILURES else 0)
 
