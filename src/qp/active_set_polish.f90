@@ -617,7 +617,7 @@ contains
     character(len=400) :: buf
     write (buf, '(a,i0,3a)') 'after outer ', outer, ': ', counted(self%face%n_steps, 'CG step'), ', '
     if (self%face%stopped_loose) buf = trim(buf)//' stopped at the loose check,'
-    write (buf, '(a,1x,i0,a,i0,a)') trim(buf), counts(1), ' free rows projected, ', counts(2), ' wrong-sign rows'
+    buf = trim(buf)//' '//counted(counts(1), 'free row')//' projected, '//counted(counts(2), 'wrong-sign row')
     if (self%settings%release .and. counts(2) > 0 .and. .not. cycling .and. rounds < self%settings%rounds) &
       buf = trim(buf)//' released'
     if (cycling) buf = trim(buf)//'; more changes than the round before: back to SMALBE'
