@@ -5,6 +5,10 @@
 !> `collective_error` is for an error every rank knows about (for example after a
 !> broadcast of an input check): rank 0 prints, every rank finalizes MPI and the
 !> process exits with a non-zero status, without Open MPI's abort banner.
+!> An input error found after the input was read (a refusal at run time:
+!> the output folder, ranks against subdomains) names the input file too:
+!> `set_input_file` records it once, and every input error message that
+!> starts with 'group &' is prefixed with 'file <name>, '.
 module errors
   use, intrinsic :: iso_fortran_env, only: error_unit, output_unit
   use, intrinsic :: iso_c_binding, only: c_int
@@ -13,7 +17,7 @@ module errors
   implicit none
   private
 
-  public :: fatal_error, collective_error, exit_process
+  public :: fatal_error, collective_error, exit_process, set_input_file
 
   interface
     !> The C library's exit: ends the process with a status and no Fortran
@@ -28,6 +32,9 @@ module errors
   integer, parameter, public :: exit_not_converged = 3  !< a solver did not converge
   integer, parameter, public :: exit_kkt_failed = 4     !< the KKT check failed
   integer, parameter, public :: exit_internal = 5       !< anything else
+
+  !> the input file of the run ('' until set_input_file)
+  character(len=:), allocatable, save :: input_file
 
 contains
 
@@ -55,17 +62,29 @@ contains
     error stop status, quiet=.true.
   end subroutine fatal_error
 
+  !> The input file that input error messages name (see the module).
+  subroutine set_input_file(file)
+    character(len=*), intent(in) :: file
+    input_file = trim(file)
+  end subroutine set_input_file
+
   !> Every rank of `comm` calls this together: rank 0 prints, all finalize, exit.
+  !> An input error about a group names the input file (set_input_file).
   subroutine collective_error(message, comm, code)
     character(len=*), intent(in) :: message
     type(MPI_Comm), intent(in) :: comm
     integer, intent(in) :: code
     integer :: rank, ierr
+    character(len=:), allocatable :: prefix
 
     call MPI_Comm_rank(comm, rank, ierr)
     flush (output_unit)
+    prefix = ''
+    if (code == exit_input_error .and. allocated(input_file)) then
+      if (len(input_file) > 0 .and. index(message, 'group &') == 1) prefix = 'file '//input_file//', '
+    end if
     if (rank == 0) then
-      write (error_unit, '(2a)') 'feticontact: ERROR: ', trim(message)
+      write (error_unit, '(3a)') 'feticontact: ERROR: ', prefix, trim(message)
       flush (error_unit)
     end if
     call MPI_Finalize(ierr)

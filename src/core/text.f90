@@ -4,7 +4,7 @@ module text
   implicit none
   private
 
-  public :: str, lower_case
+  public :: str, lower_case, counted
 
   !> `n` in decimal, no blanks.
   interface str
@@ -26,6 +26,22 @@ contains
     character(len=:), allocatable :: s
     s = str_i8(int(n, i8))
   end function str_ip
+
+  !> '1 node', '2 nodes': n and the noun, whose plural is `noun`//'s' unless
+  !> `plural` is given ('1 matrix', '2 matrices').
+  pure function counted(n, noun, plural) result(s)
+    integer(ip), intent(in) :: n
+    character(len=*), intent(in) :: noun
+    character(len=*), intent(in), optional :: plural
+    character(len=:), allocatable :: s
+    if (n == 1) then
+      s = str(n)//' '//noun
+    else if (present(plural)) then
+      s = str(n)//' '//plural
+    else
+      s = str(n)//' '//noun//'s'
+    end if
+  end function counted
 
   !> `s` with A-Z turned into a-z.
   pure function lower_case(s) result(r)

@@ -253,11 +253,9 @@ contains
       if (self%op%dirichlet_from_factors()) then
         ! the dense local solver's factors give S_s at no set-up cost and
         ! each application costs what a lumped one does: 'dirichlet' at once
-        ! (recorded as a switch at 0 products with estimate 0)
+        ! (recorded as a switch at 0 products with estimate 0; the set-up's log says so)
         call self%op%init_preconditioner(self%prec, 'dirichlet', weights)
         self%switch_at = 0
-        call log_message("preconditioner 'auto': dirichlet from the start (S_s from the dense local solver's "// &
-                         "factors: no set-up, an application costs about what a lumped one does)")
       else
         call self%op%init_preconditioner(self%prec, 'lumped', weights)
       end if

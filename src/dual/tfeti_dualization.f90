@@ -105,9 +105,14 @@ contains
       call timer_start('preconditioner setup')
       call this%dual%set_preconditioner(kind, subdomain_weights(p, this%op), p%solver%preconditioner_switch)
       call timer_stop('preconditioner setup')
-      if (kind == 'auto') then
-        write (line, '(a,es10.3,a)') "preconditioner (MPRGP in the face): auto (lumped; dirichlet once the "// &
-          'face condition estimate exceeds ', p%solver%preconditioner_switch, ')'
+      if (kind == 'auto' .and. this%dual%switch_at == 0) then
+        ! one statement of what is used: the dense local solver's factors give S_s at no set-up cost
+        call log_message("preconditioner (MPRGP in the face): 'auto' -> dirichlet from the start (S_s from "// &
+                         "the dense local solver's factors: no set-up, an application costs about what a "// &
+                         'lumped one does)')
+      else if (kind == 'auto') then
+        write (line, '(a,es10.3)') "preconditioner (MPRGP in the face): 'auto' -> lumped, then dirichlet "// &
+          'once the face condition estimate exceeds ', p%solver%preconditioner_switch
         call log_message(trim(line))
       else if (kind /= p%solver%preconditioner) then
         call log_message("preconditioner (MPRGP in the face): lumped ('auto' with hybrid TFETI, "// &

@@ -49,6 +49,7 @@ module coarse_problem
   use coarse_schur, only: coarse_schur_t, schur_factor_t
   use block_hash, only: block_hash_t
   use errors, only: fatal_error
+  use text, only: counted
   use timers, only: timer_start, timer_stop
   use lapack_interfaces, only: dpotrf, dpotrs, dtrsv, dgemm, dgemv
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gatherv, MPI_Scatterv, MPI_Wtime, &
@@ -1041,8 +1042,8 @@ contains
       c = nranks
     case default
       if (coarse_ranks > nranks) then
-        write (msg, '(a,i0,a,i0,a,i0,a)') 'group &solver, variable coarse_ranks: ', coarse_ranks, &
-          ' ranks per coarse group, more than the ', nranks, ' MPI ranks; give 1 to ', nranks, &
+        write (msg, '(a,i0,3a,i0,a)') 'group &solver, variable coarse_ranks: ', coarse_ranks, &
+          ' ranks per coarse group, more than the ', counted(nranks, 'MPI rank'), '; give 1 to ', nranks, &
           ' (or 0: chosen from the coarse dimension)'
         c = nranks
       else if (coarse_ranks < 0) then

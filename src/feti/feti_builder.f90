@@ -343,15 +343,16 @@ contains
   module subroutine refine_norm_pfp(this)
     class(feti_t), intent(inout) :: this
     if (this%lz_done) return
-    call lanczos_steps(this, this%lz_max)
+    call lanczos_steps(this, this%lz_max, '         ')   ! within the solver's monitor: indented as its notes
   end subroutine refine_norm_pfp
 
   !> Up to `steps` more steps of the Lanczos process of estimate_norm_pfp
   !> (state in feti_t%lz_*), fewer when it stops (lz_done); pfp_norm = the
-  !> largest Ritz value so far. Collective.
-  subroutine lanczos_steps(this, steps)
+  !> largest Ritz value so far; its log line starts with `indent` (optional). Collective.
+  subroutine lanczos_steps(this, steps, indent)
     class(feti_t), intent(inout) :: this
     integer(ip), intent(in) :: steps
+    character(len=*), intent(in), optional :: indent
     !> the relative change of theta at which the Lanczos process stops
     real(dp), parameter :: lanczos_change = 1.0e-2_dp
     real(dp), allocatable :: w(:), z(:)
@@ -397,7 +398,11 @@ contains
       write (line, '(a,es12.5,a,i0,a)') '||P F P|| >= ', this%pfp_norm, ' (Lanczos, ', this%lz_steps, &
         ' iterations; continued when MPRGP first needs its step length)'
     end if
-    call log_message(line)
+    if (present(indent)) then
+      call log_message(indent//trim(line))
+    else
+      call log_message(line)
+    end if
   end subroutine lanczos_steps
 
   !> this%dirichlet_holds: the Dirichlet rows alone fix every rigid body

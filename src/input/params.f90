@@ -9,7 +9,7 @@
 !> Every variable is documented in docs/INPUT.md.
 module params
   use kinds, only: dp, ip, i8, path_len, name_len
-  use errors, only: collective_error, exit_input_error, fatal_error
+  use errors, only: collective_error, exit_input_error, fatal_error, set_input_file
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast, MPI_BYTE, MPI_INTEGER, MPI_CHARACTER
   use smalbe, only: smalbe_settings_t
   use mesh_settings, only: mesh_settings_t
@@ -139,6 +139,7 @@ contains
 
     call MPI_Comm_rank(comm, rank, ierr)
     call MPI_Comm_size(comm, nranks, ierr)
+    call set_input_file(file)       ! the refusals at run time name it too
     status = 0
     msg = ''
     p = params_t()
@@ -465,17 +466,31 @@ contains
       if (s2 /= 0) then
         i = index(piece, '=')
         variable = lower(trim(adjustl(piece(1:i - 1))))
-        msg = 'variable '//variable//': '//describe(msg2, variable)// &
+        msg = 'variable '//variable//': '//describe(msg2, variable, is_string(variable))// &
               ' (in "'//trim(adjustl(piece))//'")'
         return
       end if
     end do
-    msg = describe(msg, '')
+    msg = describe(msg, '', .false.)
+  contains
+    !> `variable` of this group holds a string.
+    logical function is_string(variable)
+      character(len=*), intent(in) :: variable
+      type(param_item_t), allocatable :: items(:)
+      integer :: j
+      call param_items(p, name, items)
+      is_string = .false.
+      do j = 1, size(items)
+        if (items(j)%name == variable) is_string = items(j)%kind == 's'
+      end do
+    end function is_string
   end subroutine read_group_checked
 
   !> Turn a compiler's namelist message about `variable` into one for a user.
-  function describe(iomsg, variable) result(text)
+  !> `string`: the variable holds a string (an unquoted word then gets the hint on quotes).
+  function describe(iomsg, variable, string) result(text)
     character(len=*), intent(in) :: iomsg, variable
+    logical, intent(in) :: string
     character(len=:), allocatable :: text, unknown
     integer :: i
     i = index(iomsg, 'Cannot match namelist object name')
@@ -483,8 +498,12 @@ contains
     if (i == 0) return
     unknown = lower(trim(adjustl(iomsg(i + 33:))))
     unknown = unknown(max(1, verify(unknown, achar(39)//achar(34))):)
-    if (index(unknown, variable) == 1 .or. len(variable) == 0) &
+    if (index(unknown, variable) == 1 .or. len(variable) == 0) then
       text = 'not a variable of this group (see docs/INPUT.md for the allowed ones)'
+    else if (string .and. scan(adjustl(iomsg(i + 33:)), achar(39)//achar(34)) /= 1) then
+      ! an unquoted word: gfortran reads it as the name of the next variable
+      text = "a string value needs quotes: "//variable//" = '"//trim(unknown)//"'"
+    end if
   end function describe
 
   !> Positions in `body` where an assignment 'name[(...)] =' starts.

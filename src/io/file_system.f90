@@ -1,14 +1,14 @@
 !> The few POSIX file system calls the output needs (Fortran has none of them):
-!> directory test, mkdir -p, atomic rename, the process id.
+!> directory test, mkdir -p, atomic rename, the process id, the absolute path.
 !>
 !> The C library is called through `bind(c)` interfaces; paths are passed as
 !> NUL-terminated copies of the trimmed Fortran strings.
 module file_system
-  use, intrinsic :: iso_c_binding, only: c_int, c_char, c_null_char
+  use, intrinsic :: iso_c_binding, only: c_int, c_char, c_null_char, c_ptr, c_null_ptr, c_associated
   implicit none
   private
 
-  public :: is_directory, path_exists, make_directories, rename_file, process_id
+  public :: is_directory, path_exists, make_directories, rename_file, process_id, absolute_path
 
   integer(c_int), parameter :: f_ok = 0                !< access(): existence test
   integer(c_int), parameter :: mode_all = 511_c_int    !< 0777, reduced by the umask
@@ -34,6 +34,12 @@ module file_system
     integer(c_int) function c_getpid() bind(c, name='getpid')
       import :: c_int
     end function c_getpid
+
+    type(c_ptr) function c_realpath(path, resolved) bind(c, name='realpath')
+      import :: c_ptr, c_char
+      character(kind=c_char), intent(in) :: path(*)
+      character(kind=c_char), intent(out) :: resolved(*)
+    end function c_realpath
   end interface
 
 contains
@@ -99,6 +105,21 @@ contains
     integer, intent(out) :: status
     status = int(c_rename(trim(from)//c_null_char, trim(to)//c_null_char))
   end subroutine rename_file
+
+  !> The absolute, resolved form of the existing `path` (POSIX realpath); `path`
+  !> itself when it cannot be resolved (it does not exist, or is too long).
+  function absolute_path(path) result(full)
+    character(len=*), intent(in) :: path
+    character(len=:), allocatable :: full
+    integer, parameter :: path_max = 4096       ! PATH_MAX on Linux
+    character(kind=c_char, len=path_max + 1) :: buf
+    integer :: n
+    full = trim(path)
+    buf = ''
+    if (.not. c_associated(c_realpath(trim(path)//c_null_char, buf))) return
+    n = index(buf, c_null_char) - 1
+    if (n > 0) full = buf(1:n)
+  end function absolute_path
 
   !> The id of this process (to make scratch file names unique).
   integer function process_id()

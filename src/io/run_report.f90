@@ -15,6 +15,8 @@ module run_report
   use json_writer, only: json_writer_t
   use report, only: timings_json, memory_json, blas_json, params_json
   use blas_threads, only: blas_in_use
+  use build_info, only: fc_source_dir
+  use file_system, only: absolute_path, path_exists
   use mpi_f08, only: MPI_Comm_size, MPI_Allreduce, MPI_SUM
   implicit none
   private
@@ -219,16 +221,20 @@ contains
     end function short
   end function solver_variant
 
-  !> Where the output is and how to look at it (a user's first question).
+  !> Where the output is and how to look at it (a user's first question), with
+  !> absolute paths: the hints work from any folder (the plotting tool of the
+  !> sources the program was built from; relative to them when they moved).
   subroutine log_where_to_look(p)
     type(params_t), intent(in) :: p
-    character(len=:), allocatable :: dir
-    dir = trim(p%output%directory)
+    character(len=:), allocatable :: dir, tool
+    dir = absolute_path(p%output%directory)
+    tool = fc_source_dir//'/tools/plots.py'
+    if (.not. path_exists(tool)) tool = 'tools/plots.py (in the feticontact sources)'
     if (p%output%write_hdf5) then
       call log_message('output: '//dir//'/'//trim(p%output%run_name)//'.xdmf (fields for ParaView; '// &
                        'its grid "contact" holds the contact pressure and gap)')
       if (p%obstacle%shape == 'sphere') call log_message('contact pressure against Hertz: '// &
-        '/usr/bin/python3 tools/plots.py hertz '//dir//' --figures '//dir)
+        '/usr/bin/python3 '//tool//' hertz '//dir//' --figures '//dir)
     end if
     if (p%output%write_report) call log_message('report: '//dir//'/report.json (settings, iterations, '// &
                                                 'KKT residuals, timings)')

@@ -40,6 +40,7 @@ module decomposition
   use mesh_settings, only: mesh_settings_t
   use metis_wrapper, only: metis_part_graph_kway
   use sorting, only: sort_ints, append_unmarked
+  use text, only: counted
   use box_mesh, only: box_mesh_t, box_mesh_init
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast
   implicit none
@@ -114,10 +115,9 @@ contains
     end select
 
     if (nranks > dec%nsubdomains) then
-      write (msg, '(a,3(1x,i0),a,i0,a,i0,a,i0,a)') 'group &mesh, variable nsub: nsub =', m%nsub, &
-        ' gives ', dec%nsubdomains, ' subdomains, fewer than the ', nranks, &
-        ' MPI ranks; every rank needs a subdomain: run on at most ', dec%nsubdomains, &
-        ' ranks or raise nsub'
+      write (msg, '(a,3(1x,i0),9a)') 'group &mesh, variable nsub: nsub =', m%nsub, &
+        ' gives ', counted(dec%nsubdomains, 'subdomain'), ', fewer than the ', counted(nranks, 'MPI rank'), &
+        '; every rank needs a subdomain: run on at most ', counted(dec%nsubdomains, 'rank'), ' or raise nsub'
       call collective_error(msg, comm, exit_input_error)
     end if
 
@@ -185,9 +185,9 @@ contains
     dec%nblock = (dec%mesh%ng + dec%block - 1)/dec%block
     nb = product(dec%nblock)
     if (nb < nparts) then
-      write (msg, '(a,i0,a,i0,a,i0,a)') 'group &mesh, variable metis_block: blocks of ', dec%block, &
-        ' elements per edge give ', nb, ' blocks, fewer than the ', nparts, &
-        ' parts (product(nsub)); use 0 (automatic) or a smaller b >= 1'
+      write (msg, '(a,i0,5a)') 'group &mesh, variable metis_block: blocks of ', dec%block, &
+        ' elements per edge give ', counted(nb, 'block'), ', fewer than the ', counted(nparts, 'part'), &
+        ' (product(nsub)); use 0 (automatic) or a smaller b >= 1'
       call collective_error(msg, dec%comm, exit_input_error)
     end if
     allocate (part(nb))

@@ -40,6 +40,7 @@
 module active_set_polish
   use kinds, only: dp, ip, i8, name_len, MPI_INT_IP, MPI_INT_I8
   use logger, only: log_message
+  use text, only: counted
   use timers, only: timer_start, timer_stop
   use report_sink, only: report_sink_t
   use qp_problem, only: qp_problem_t, no_lower_bound
@@ -238,6 +239,7 @@ contains
     integer(ip) :: local, n_bounded
     integer :: ierr
     self%monitor = monitor
+    self%face%monitor%on = monitor
     call self%reset()
     self%active = self%settings%window > 0 .and. problem%has_face_solver()
     if (allocated(self%free_now)) deallocate (self%free_now, self%free_prev)
@@ -281,10 +283,10 @@ contains
     n = problem%n
     if (self%warm_face) then
       ! a warm start: its own face (rows above their bound stay free)
-      if (self%monitor) call log_message('polish first: the face of the warm start')
+      call self%face%monitor%note('polish first: from the face of the warm start')
       self%free_now(1:n) = .not. problem%lower(1:n) > no_lower_bound .or. x(1:n) > problem%lower(1:n)
     else
-      if (self%monitor) call log_message('polish first: the face with every contact row at its bound')
+      call self%face%monitor%note('polish first: from the face with every contact row at its bound')
       self%free_now(1:n) = .not. problem%lower(1:n) > no_lower_bound
     end if
     self%warm_face = .false.
@@ -386,13 +388,14 @@ contains
     class(active_set_polish_t), intent(in) :: self
     character(len=300) :: buf
     if (self%n_polish == 0) return
-    write (buf, '(a,i0,a,i0,a,i0,a,i0,a,i0,a,i0,a)') '  polish ', self%n_polish, ' times (', self%n_rounds, &
-      ' face solves, ', self%n_steps, ' CG steps, ', self%n_products, ' Hessian multiplications; accepted at once ', &
-      self%n_exact, ', given up ', self%n_aborted, ')'
-    if (self%settings%release) write (buf, '(a,a,i0,a)') trim(buf), ', released ', self%n_released, ' active rows'
-    if (self%n_predicted > 0) write (buf, '(a,a,i0,a)') trim(buf), ', predicted ', self%n_predicted, ' active rows'
-    if (self%n_forced > 0) write (buf, '(a,a,i0,a)') trim(buf), '; ', self%n_forced, &
-      ' inner solves after a polish made to take a step'
+    write (buf, '(9a,i0,a,i0,a)') '  polish: ', counted(self%n_polish, 'polish', 'polishes'), ' (', &
+      counted(self%n_rounds, 'face solve'), ', ', counted(self%n_steps, 'CG step'), ', ', &
+      counted(self%n_products, 'Hessian multiplication'), '; accepted at once ', self%n_exact, ', given up ', &
+      self%n_aborted, ')'
+    if (self%settings%release) buf = trim(buf)//', released '//counted(self%n_released, 'row')//' from their bound'
+    if (self%n_predicted > 0) buf = trim(buf)//', predicted '//counted(self%n_predicted, 'row')//' at their bound'
+    if (self%n_forced > 0) buf = trim(buf)//'; '//counted(self%n_forced, 'inner solve')// &
+      ' after a polish made to take a step'
     call log_message(buf)
   end subroutine summary
 
@@ -482,6 +485,9 @@ contains
       ! after a round that only released rows, x is that round's face solution unchanged (on the new
       ! face too) and its gradient is known: the Lagrangian gradient without the multiplier term
       if (g_known) g(1:n) = g(1:n) - ct_mu(1:n)
+      self%face%monitor%base = n_hessian
+      self%face%monitor%polish = self%n_polish
+      self%face%monitor%round = rounds
       call self%face%run(problem, self%free_now, x, g, muhat, polish_target*tol_gp, per_component, budget, loose, &
                          change_tol, budget_trusted, g_known)
       call problem%face_free()
@@ -502,12 +508,10 @@ contains
         ! (b_lin and ct_mu still belong to muhat_prev, the previous round's face multiplier)
         if (rounds > 1) call fresh_gradient(self, problem, x, g, b_lin, n_hessian)
         self%n_aborted = self%n_aborted + 1
-        if (self%monitor) then
-          write (buf, '(a,i0,a,i0,a,i0,a,es9.2,a,es9.2,a)') 'polish after outer ', outer, ': given up after ', &
-            self%face%n_steps, ' CG steps (', self%face%n_hessian, ' products; residual ', &
-            self%face%measure0, ' -> ', self%face%measure, ' too slow for its budget), iterate restored'
-          call log_message(trim(buf))
-        end if
+        write (buf, '(a,i0,a,i0,a)') 'after outer ', outer, ': given up after ', self%face%n_steps, &
+          ' CG steps (too slow for its budget), iterate restored'
+        call self%face%monitor%round_line(self%n_polish, rounds, n_hessian, self%face%measure, &
+                                          polish_target*tol_gp, trim(buf))
         exit
       end if
       ! the gradient of the Lagrangian with the face multiplier
@@ -523,14 +527,14 @@ contains
       if (self%settings%release) n_changes = n_changes + counts(2)
       cycling = self%settings%release .and. polish_cycling(rounds, n_changes, prev_changes, .false.)
       prev_changes = n_changes
-      if (self%monitor) call log_round(self, outer, counts, tol_gp, rounds, cycling)
+      if (self%monitor) call log_round(self, outer, counts, tol_gp, rounds, cycling, n_hessian)
       again = n_changes > 0 .and. rounds < self%settings%rounds .and. .not. cycling .and. &
               max_hessian - n_hessian > 2 .and. .not. self%face%breakdown
       if (again) then
         call next_face(self, problem, x, g, tol_gp, counts, rounds, signatures, cut_short, revisit_used, g_known, &
                        revisited)
         if (revisited) then
-          if (self%monitor) call log_message('polish: the next face is that of an earlier round: back to SMALBE')
+          call self%face%monitor%note('polish: the next face is that of an earlier round: back to SMALBE')
           if (counts(1) > 0) call fresh_gradient(self, problem, x, g, b_lin, n_hessian)
           exit
         end if
@@ -575,10 +579,10 @@ contains
       if (rounds == 1) share = self%settings%release_share
       n_released = released_rows(problem, self%free_now, g, tol_gp, share, release)
       self%n_released = self%n_released + n_released
-      if (self%monitor .and. n_released < counts(2)) then
+      if (n_released < counts(2)) then
         write (buf, '(a,i0,a,i0,a,f4.2,a)') 'polish: ', n_released, ' of the ', counts(2), &
           ' wrong-sign rows released (those of at least ', share, ' times the largest wrong-sign gradient)'
-        call log_message(trim(buf))
+        call self%face%monitor%note(trim(buf))
       end if
     end if
     ! predictive update: after a round that projected at least `predict` rows and released none, as
@@ -587,9 +591,9 @@ contains
     if (self%settings%predict > 0 .and. counts(1) >= self%settings%predict .and. counts(2) == 0) then
       n_predicted = predicted_rows(problem, self%free_now, x, counts(1), release)
       self%n_predicted = self%n_predicted + n_predicted
-      if (self%monitor .and. n_predicted > 0) then
+      if (n_predicted > 0) then
         write (buf, '(a,i0,a)') 'polish: ', n_predicted, ' more free rows nearest their bound made active'
-        call log_message(trim(buf))
+        call self%face%monitor%note(trim(buf))
       end if
     end if
     if (counts(1) > 0) then
@@ -610,29 +614,27 @@ contains
       revisit_used = revisit_of_cut_short(signatures(:, 1:rounds), cut_short(1:rounds), signatures(:, rounds + 1))
       if (revisit_used) then
         revisited = .false.
-        if (self%monitor) call log_message('polish: the next face is that of an earlier round cut short '// &
+        call self%face%monitor%note('polish: the next face is that of an earlier round cut short '// &
                                            'at a loose check: solved once more')
       end if
     end if
   end subroutine next_face
 
-  !> The monitor line of one round of a polish.
-  subroutine log_round(self, outer, counts, tol_gp, rounds, cycling)
+  !> The monitor line of one round of a polish (n_hessian: the products so far).
+  subroutine log_round(self, outer, counts, tol_gp, rounds, cycling, n_hessian)
     class(active_set_polish_t), intent(in) :: self
-    integer(ip), intent(in) :: outer, counts(2), rounds
+    integer(ip), intent(in) :: outer, counts(2), rounds, n_hessian
     real(dp), intent(in) :: tol_gp
     logical, intent(in) :: cycling
     character(len=400) :: buf
-    write (buf, '(a,i0,a,i0,a,i0,a,es9.2,a,es9.2,a,es9.2,a,l1,a,i0,a,i0,a)') 'polish after outer ', outer, &
-      ': ', self%face%n_steps, ' CG steps, ', self%face%n_hessian, ' products, residual ', &
-      self%face%measure0, ' -> ', self%face%measure, ' (target ', polish_target*tol_gp, &
-      ', reached ', self%face%reached, '); ', counts(1), ' free rows projected onto their bound, ', &
-      counts(2), ' active rows with a wrong-sign gradient'
-    if (self%face%stopped_loose) buf = trim(buf)//' (stopped at the loose check)'
+    write (buf, '(a,i0,3a)') 'after outer ', outer, ': ', counted(self%face%n_steps, 'CG step'), ', '
+    if (self%face%stopped_loose) buf = trim(buf)//' stopped at the loose check,'
+    buf = trim(buf)//' '//counted(counts(1), 'free row')//' projected, '//counted(counts(2), 'wrong-sign row')
     if (self%settings%release .and. counts(2) > 0 .and. .not. cycling .and. rounds < self%settings%rounds) &
-      buf = trim(buf)//', released'
+      buf = trim(buf)//' released'
     if (cycling) buf = trim(buf)//'; more changes than the round before: back to SMALBE'
-    call log_message(trim(buf))
+    call self%face%monitor%round_line(self%n_polish, rounds, n_hessian, self%face%measure, polish_target*tol_gp, &
+                                      trim(buf))
   end subroutine log_round
 
   !> The gradient A x - b_lin at the current x (one product, counted as the polish's).

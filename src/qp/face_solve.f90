@@ -55,6 +55,7 @@ module face_solve
   use qp_problem, only: qp_problem_t, no_lower_bound
   use mprgp, only: ensure_size
   use ritz_values, only: cg_ritz_t
+  use solver_monitor, only: solver_monitor_t
   use mpi_f08, only: MPI_Allreduce, MPI_SUM
   implicit none
   private
@@ -88,6 +89,7 @@ module face_solve
     !> a loose check found no change: not given up any more, budget max_steps_trusted
     logical :: trusted = .false.
     integer(ip) :: loose_counts(2) = 0   !< face_changes at the loose check (0 when not checked)
+    type(solver_monitor_t) :: monitor    !< the caller's monitor: one line per CG step
     real(dp), allocatable, private :: r(:), z(:), p(:), q(:), w(:)
     real(dp), allocatable, private :: g0(:)   !< g at the start (problems with face_lazy)
     real(dp), allocatable, private :: cz(:)   !< coefficients of P_F z (muhat keeps those of g)
@@ -268,6 +270,7 @@ contains
           unfolded = 0
         end if
         self%measure = measure(problem, self%r, per_component)
+        call self%monitor%face_step(self%n_steps, self%n_hessian, self%measure, target)
         if (self%measure <= target) then
           self%reached = .true.
           exit

@@ -9,10 +9,13 @@ module inner_solver
   implicit none
   private
 
-  !> A stopping rule asked once per iteration (and at the start) by minimize.
+  !> A stopping rule asked once per iteration (and at the start) by minimize;
+  !> `observe` (nothing by default) is told each step's kind first (the
+  !> caller's monitor: module solver_monitor).
   type, abstract, public :: inner_stop_t
   contains
     procedure(stop_test_iface), deferred :: test
+    procedure :: observe => observe_nothing
   end type inner_stop_t
 
   !> An inner solver of bound-constrained QPs. Counters and gp_norm describe
@@ -83,4 +86,16 @@ module inner_solver
       character(len=:), allocatable :: text
     end function variant_iface
   end interface
+
+contains
+
+  !> After a step of `kind` (solver_monitor: step_cg, ...; step_none before the
+  !> first): `products` Hessian multiplications of this call so far, ||g^P||
+  !> = gp_norm. The default rule watches nothing.
+  subroutine observe_nothing(self, kind, products, gp_norm)
+    class(inner_stop_t), intent(inout) :: self
+    integer, intent(in) :: kind
+    integer(ip), intent(in) :: products
+    real(dp), intent(in) :: gp_norm
+  end subroutine observe_nothing
 end module inner_solver

@@ -103,6 +103,7 @@ module mprgp
                         qp_status_max_hessian, qp_status_not_finite, qp_status_breakdown, &
                         qp_status_incompatible, qp_status_not_run, qp_message_len
   use inner_solver, only: inner_solver_t, inner_stop_t
+  use solver_monitor, only: step_none, step_cg, step_expansion, step_proportioning
   implicit none
   private
 
@@ -382,6 +383,7 @@ contains
     real(dp) :: stats(4), gp, alpha_f, alpha_cg, pap, a_refined
     logical :: stop, restart, conjugate_pending
     integer(ip) :: n
+    integer :: last_kind                   ! the kind of the last step (the rule's monitor)
 
     n = problem%n
     call ensure_size(self%p, n)
@@ -418,6 +420,7 @@ contains
     call split_stats(self, problem, x, g, stats)
     restart = .true.
     conjugate_pending = .false.
+    last_kind = step_none
 
     do
       gp = sqrt(stats(1) + stats(2))
@@ -430,6 +433,7 @@ contains
         self%best_gp_norm = gp
         self%n_best = self%n_iterations
       end if
+      call stop_rule%observe(last_kind, self%n_hessian, gp)
       call stop_rule%test(problem, x, g, gp, stop)
       if (stop) then
         call set_status(self, qp_status_converged, 'converged (stopping rule met)', self%n_iterations)
@@ -475,6 +479,7 @@ contains
           call take_step(problem, x, g, alpha_cg, self%p, self%ap)
           call problem%track_step(alpha_cg)
           self%n_cg = self%n_cg + 1
+          last_kind = step_cg
           if (self%preconditioned) then
             ! z and the conjugation wait until a CG step follows (see the module)
             call split_stats(self, problem, x, g, stats)
@@ -496,6 +501,7 @@ contains
           call take_step(problem, x, g, alpha_f, self%p, self%ap)
           call problem%track_step(alpha_f)
           self%n_expansion = self%n_expansion + 1
+          last_kind = step_expansion
           call expand(self, problem, b_lin, x, g, max_hessian)
           if (self%status /= qp_status_not_run) exit
           call gradient_part(problem, x, g, .false., self%p)
@@ -512,6 +518,7 @@ contains
         call take_step(problem, x, g, alpha_cg, self%p, self%ap)
         call problem%track_step(alpha_cg)
         self%n_proportioning = self%n_proportioning + 1
+        last_kind = step_proportioning
         call gradient_part(problem, x, g, .false., self%p)
         call split_stats(self, problem, x, g, stats)
       end if

@@ -85,7 +85,7 @@ module smalbe
   use kinds, only: dp, ip, i8, name_len
   use errors, only: fatal_error
   use logger, only: log_message
-  use text, only: lower_case
+  use text, only: lower_case, counted
   use report_sink, only: report_sink_t
   use qp_problem, only: qp_problem_t, qp_solver_t, qp_message_len, compensated_add, qp_status_converged, &
                         qp_status_max_hessian, qp_status_max_outer, qp_status_not_finite, &
@@ -93,6 +93,7 @@ module smalbe
   use inner_solver, only: inner_solver_t, inner_stop_t
   use mprgp, only: mprgp_t, mprgp_settings_t, ensure_size
   use active_set_polish, only: active_set_polish_t, polish_settings_t
+  use solver_monitor, only: solver_monitor_t
   implicit none
   private
 
@@ -117,8 +118,10 @@ module smalbe
     integer(ip) :: n_eq_residual = 0
     real(dp), allocatable :: z(:)
     real(dp), allocatable :: work(:)       !< C^T C x, then g - rho C^T C x (per-component test)
+    type(solver_monitor_t) :: monitor      !< SMALBE's monitor (its mprgp and outer lines)
   contains
     procedure :: test => inner_stop_test
+    procedure :: observe => inner_stop_observe
     procedure :: outer_measures
     procedure :: outer_met
   end type smalbe_inner_stop_t
@@ -278,6 +281,20 @@ contains
     call self%outer_measures(problem, x, g, gp_norm)
     stop = self%outer_met()
   end subroutine inner_stop_test
+
+  !> The monitor's line of a run of MPRGP steps: ||g^P|| against the inner
+  !> bound min(M ||C x||, eta) at the last evaluation of ||C x|| (eta before
+  !> the first of the solve: cnorm < 0).
+  subroutine inner_stop_observe(self, kind, products, gp_norm)
+    class(smalbe_inner_stop_t), intent(inout) :: self
+    integer, intent(in) :: kind
+    integer(ip), intent(in) :: products
+    real(dp), intent(in) :: gp_norm
+    real(dp) :: bound
+    bound = self%eta
+    if (self%cnorm >= 0) bound = min(self%m_bound*self%cnorm, self%eta)
+    call self%monitor%inner_step(kind, products, gp_norm, bound)
+  end subroutine inner_stop_observe
 
   !> gp_measure and eq_measure at x (g the gradient there; z and cnorm of
   !> eq_residual at x already computed). Classical: ||g^P|| and ||C x||.
@@ -513,7 +530,7 @@ contains
     if (.not. self%is_compatible(problem, reason)) then
       self%status = qp_status_incompatible
       self%message = 'problem refused: '//trim(reason)
-      if (self%monitor) call log_message('SMALBE: '//trim(self%message))
+      call log_message('SMALBE reason: '//reason_code(self%status)//'; '//trim(self%message))
       return
     end if
     if (size(x) < problem%n) call fatal_error('smalbe: x shorter than the local length of the problem')
@@ -536,7 +553,9 @@ contains
       if (.not. inner_step(self, problem, x, outer, gradient_given)) exit
       gradient_given = .true.
       if (.not. outer_values(self, problem, x, outer, change)) exit
-      if (self%monitor) call monitor_line(self, problem, x, outer)
+      if (self%monitor) call self%rule%monitor%outer_line(outer, self%n_hessian, self%gp_measure, self%tol_gp, &
+                                                          self%eq_measure, self%tol_c, self%rho, &
+                                                          problem%count_at_bound(x))
       ! the active set: unchanged for how many outer iterations (polish)
       call self%polish%track(problem, x, outer, self%inner%n_iterations > 0)
       ! 2. outer stopping criterion, caps
@@ -558,7 +577,7 @@ contains
     end do
     self%n_eq_residual = self%rule%n_eq_residual
     self%n_active = problem%count_at_bound(x)
-    if (self%monitor) call monitor_summary(self)
+    call monitor_summary(self)
   end subroutine smalbe_solve
 
   !> Work vectors, the penalty, the tolerances and M_0, muhat = 0, the inner
@@ -632,6 +651,8 @@ contains
     self%rule%rho = self%rho
     self%rule%eta = self%eta
     self%rule%n_eq_residual = 0
+    self%rule%cnorm = -1
+    self%rule%monitor%on = self%monitor
     self%l_shift = 0
     self%n_idle = 0
     self%last_raise = 0
@@ -657,8 +678,11 @@ contains
     self%rule%n_forced_cuts = 0
     ! right after a polish (force_step): the inner solve takes a step unless the outer test holds
     self%rule%force_step = self%after_polish .and. self%settings%polish%force_step
+    self%rule%monitor%base = self%n_hessian
+    self%rule%monitor%outer = outer
     call self%inner%minimize(problem, self%b_lin, x, self%gradient, self%rule, &
                              self%settings%max_hessian - self%n_hessian, gradient_given)
+    call self%rule%monitor%inner_flush()
     if (self%rule%n_forced_cuts > 0) then
       self%m_bound = self%rule%m_bound      ! the bound this inner solve used (monitor)
       self%polish%n_forced = self%polish%n_forced + 1
@@ -1021,6 +1045,7 @@ contains
     self%rho_history = [real(dp) ::]
   end subroutine reset_counters
 
+  !> The monitor's head: the parameters, the stopping test, the column heads.
   subroutine monitor_header(self)
     class(smalbe_t), intent(in) :: self
     character(len=200) :: buf
@@ -1030,39 +1055,27 @@ contains
     write (buf, '(3a,es10.3,3a,es10.3)') 'SMALBE: stop when ', gp_name(self), ' <= ', self%tol_gp, &
       ' and ', eq_name(self), ' <= ', self%tol_c
     call log_message(trim(buf))
-    write (buf, '(a5,a7,a9,5a12,a9)') 'outer', 'inner', 'hessian', '||g^P||', '||Cx||', 'M', 'rho', &
-      'L', 'active'
-    call log_message(buf)
+    call self%rule%monitor%legend(gp_name(self), eq_name(self))
   end subroutine monitor_header
 
-  subroutine monitor_line(self, problem, x, outer)
-    class(smalbe_t), intent(in) :: self
-    class(qp_problem_t), intent(inout) :: problem
-    real(dp), intent(in) :: x(:)
-    integer(ip), intent(in) :: outer
-    character(len=200) :: buf
-    integer(ip) :: active
-    active = problem%count_at_bound(x)
-    write (buf, '(i5,i7,i9,5es12.4,i9)') outer, self%inner%n_iterations, self%n_hessian, self%gp_norm, &
-      self%cnorm, self%m_bound, self%rho, self%lagrangian, active
-    call log_message(buf)
-  end subroutine monitor_line
-
+  !> The summary (written with the monitor off too): the counts, then the
+  !> reason line, which says which criterion ended the solve and after how
+  !> many outer iterations and Hessian multiplications.
   subroutine monitor_summary(self)
     class(smalbe_t), intent(in) :: self
     character(len=300) :: buf
-    call log_message('SMALBE: '//trim(self%message))
-    write (buf, '(a,i0,a,i0,a,i0,a,i0,a,i0,a,i0,a)') '  outer iterations ', self%n_outer, &
-      ', inner iterations ', self%n_inner, ' (cg ', self%n_cg, ', expansion ', self%n_expansion, &
-      ', proportioning ', self%n_proportioning, ', expansion fallbacks ', self%n_expansion_fallback, ')'
-    call log_message(buf)
-    write (buf, '(a,i0,a,i0,a,i0,a,es10.3,a,i0,a,i0,3a)') '  Hessian multiplications ', self%n_hessian, &
-      ', ||Cx|| evaluations ', self%n_eq_residual, ', M updates ', self%n_m_updates, ', final M ', &
-      self%m_bound, ', active ', self%n_active, ', inner solves without a step ', self%n_no_step, &
-      ' (m_no_step = ', trim(self%settings%m_no_step), ')'
-    call log_message(buf)
-    write (buf, '(a,es10.3,a,es10.3,a,i0,a)') '  rho ', self%rho_initial, ' -> ', self%rho, ' (raised ', &
-      self%n_rho_updates, ' times)'
+    write (buf, '(a,i0,a,i0,a,i0,a,i0,a,i0,a)') '  inner MPRGP: ' // counted(self%n_inner, 'step') // ' (cg ', &
+      self%n_cg, ', expansion ', self%n_expansion, ', proportioning ', self%n_proportioning, &
+      ', expansion fallbacks ', self%n_expansion_fallback, '), ', self%n_hessian - self%polish%n_products, &
+      ' Hessian multiplications'
+    call log_message(trim(buf))
+    write (buf, '(a,i0,3a,es10.3,a,es10.3,5a,i0)') '  ||C x|| evaluations ', self%n_eq_residual, &
+      ', M cut ', counted(self%n_m_updates, 'time'), ' (', self%m_initial, ' -> ', self%m_bound, '; ', &
+      counted(self%n_no_step, 'inner solve'), ' without a step, m_no_step = ', trim(self%settings%m_no_step), &
+      '), rows at bound ', self%n_active
+    call log_message(trim(buf))
+    write (buf, '(a,es10.3,a,es10.3,3a)') '  rho ', self%rho_initial, ' -> ', self%rho, ' (raised ', &
+      counted(self%n_rho_updates, 'time'), ')'
     call log_message(buf)
     if (self%inner%ritz%n_runs > 0) then
       write (buf, '(a,l1,a,i0,a,es10.3,a,es10.3,a,es10.3,a,i0,a,i0)') '  preconditioned ', self%preconditioned, &
@@ -1077,7 +1090,32 @@ contains
         self%inner%a_norm, ' by Rayleigh quotients of the search directions (', self%n_norm_updates, ' times)'
       call log_message(buf)
     end if
+    call log_message('SMALBE reason: '//reason_code(self%status)//' after '// &
+                     counted(self%n_outer, 'outer iteration')//' and '// &
+                     counted(self%n_hessian, 'Hessian multiplication')//'; '//trim(self%message))
   end subroutine monitor_summary
+
+  !> The reason's code word (as PETSc's KSPConvergedReason): CONVERGED_TOL,
+  !> DIVERGED_MAX_HESSIAN, DIVERGED_MAX_OUTER, DIVERGED_NAN, DIVERGED_BREAKDOWN,
+  !> DIVERGED_REFUSED.
+  function reason_code(status) result(code)
+    integer, intent(in) :: status
+    character(len=:), allocatable :: code
+    select case (status)
+    case (qp_status_converged)
+      code = 'CONVERGED_TOL'
+    case (qp_status_max_hessian)
+      code = 'DIVERGED_MAX_HESSIAN'
+    case (qp_status_max_outer)
+      code = 'DIVERGED_MAX_OUTER'
+    case (qp_status_not_finite)
+      code = 'DIVERGED_NAN'
+    case (qp_status_incompatible)
+      code = 'DIVERGED_REFUSED'
+    case default
+      code = 'DIVERGED_BREAKDOWN'
+    end select
+  end function reason_code
 
 
 end module smalbe

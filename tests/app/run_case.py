@@ -296,6 +296,97 @@ def check_kkt_failed(outdir, groups, log):
         check(abs(logged[name] - worst) <= 1e-3 * worst, "the log names %s = %.3e, the largest" % (name, logged[name]))
 
 
+MONITOR_LINE = re.compile(r"^\s*(\d+)  (outer|mprgp|face|round)\s+(\S+)\s+(\S+)\s+(\S+)(?:  (.*))?$")
+REASON_LINE = re.compile(r"^SMALBE reason: (\w+) after (\d+) outer iterations? and (\d+) Hessian multiplications?; (.*)$")
+
+
+def monitor_lines(log):
+    """The monitor's lines (docs/INPUT.md "The monitor"): (products, loop, step, measure, target, details)."""
+    lines = []
+    for text in log.splitlines():
+        m = MONITOR_LINE.match(text)
+        if m:
+            lines.append((int(m.group(1)), m.group(2), m.group(3), float(m.group(4)), float(m.group(5)),
+                          m.group(6) or ""))
+    return lines
+
+
+def check_reason(outdir, log, expected):
+    """The reason line is there (whatever the monitor setting), names `expected` (CONVERGED_TOL,
+    DIVERGED_MAX_HESSIAN, ...) and counts the outer iterations and Hessian multiplications
+    that report.json records."""
+    found = [REASON_LINE.match(t) for t in log.splitlines() if t.startswith("SMALBE reason:")]
+    check(len(found) == 1 and found[0] is not None, "one parseable 'SMALBE reason:' line (found %d)" % len(found))
+    if not found or found[0] is None:
+        return
+    m = found[0]
+    s = solver_report(outdir)
+    check(m.group(1) == expected, "the reason is %s (got %s)" % (expected, m.group(1)))
+    check(int(m.group(2)) == s["outer_iterations"], "reason line: %s outer iterations, report.json %d"
+          % (m.group(2), s["outer_iterations"]))
+    check(int(m.group(3)) == s["hessian_multiplications"], "reason line: %s Hessian multiplications, report.json %d"
+          % (m.group(3), s["hessian_multiplications"]))
+    check(s["converged"] == expected.startswith("CONVERGED"), "report.json converged agrees with the reason")
+    summary = [t for t in log.splitlines() if t.startswith("  inner MPRGP: ")]
+    check(len(summary) == 1, "the summary's counts line is there")
+
+
+def check_monitor(outdir, log):
+    """The monitor's lines agree with report.json: one outer line per outer iteration, numbered
+    1..n; the MPRGP lines' step counts add up to the CG, expansion and proportioning steps; one
+    face line per polish CG step and one round line per face solve; the products column never
+    decreases and the last line's is the total of Hessian multiplications; measures and targets
+    are finite and >= 0; when the run converged, the last outer line meets both targets and no
+    earlier one does."""
+    lines = monitor_lines(log)
+    s = solver_report(outdir)
+    check(len(lines) > 0, "monitor lines present (%d)" % len(lines))
+    if not lines:
+        return
+    outer = [l for l in lines if l[1] == "outer"]
+    check([int(l[2]) for l in outer] == list(range(1, s["outer_iterations"] + 1)),
+          "outer lines 1..%d (got %d lines)" % (s["outer_iterations"], len(outer)))
+    kinds = {"cg": 0, "expansion": 0, "proportioning": 0}
+    for l in lines:
+        if l[1] == "mprgp":
+            m = re.match(r"(cg|expansion|proportioning)\((\d+)\)$", l[2])
+            check(m is not None, "mprgp step %r is kind(count)" % l[2])
+            if m:
+                kinds[m.group(1)] += int(m.group(2))
+    check(kinds["cg"] == s["cg_steps"], "mprgp lines: %d CG steps, report.json %d" % (kinds["cg"], s["cg_steps"]))
+    check(kinds["expansion"] == s["expansion_steps"], "mprgp lines: %d expansion steps, report.json %d"
+          % (kinds["expansion"], s["expansion_steps"]))
+    check(kinds["proportioning"] == s["proportioning_steps"], "mprgp lines: %d proportioning steps, report.json %d"
+          % (kinds["proportioning"], s["proportioning_steps"]))
+    faces = [l for l in lines if l[1] == "face"]
+    rounds = [l for l in lines if l[1] == "round"]
+    check(len(faces) == s.get("polish_cg_steps", 0), "face lines %d == polish_cg_steps %s"
+          % (len(faces), s.get("polish_cg_steps")))
+    check(len(rounds) == s.get("polish_face_solves", 0), "round lines %d == polish_face_solves %s"
+          % (len(rounds), s.get("polish_face_solves")))
+    products = [l[0] for l in lines]
+    check(all(a <= b for a, b in zip(products, products[1:])), "the products column never decreases")
+    check(products[-1] == s["hessian_multiplications"], "last line's products %d == hessian_multiplications %d"
+          % (products[-1], s["hessian_multiplications"]))
+    check(all(l[3] >= 0 and l[4] >= 0 and np.isfinite(l[3]) and np.isfinite(l[4]) for l in lines),
+          "measures and targets finite and >= 0")
+    if s["converged"] and outer:
+        check(outer[-1][3] <= outer[-1][4], "the last outer line meets its target (%.3e <= %.3e)"
+              % (outer[-1][3], outer[-1][4]))
+
+        def feasible(details):
+            m = re.match(r"feasibility\s+(\S+) \(target\s+(\S+)\)", details)
+            return m is not None and float(m.group(1)) <= float(m.group(2))
+        check(feasible(outer[-1][5]), "the last outer line's feasibility meets its target: %r" % outer[-1][5])
+        check(not any(l[3] <= l[4] and feasible(l[5]) for l in outer[:-1]),
+              "no earlier outer line meets both targets (the solve would have stopped there)")
+
+
+def check_no_monitor(log):
+    """monitor = .false.: no monitor line, while the summary and the reason line stay (check reason)."""
+    check(len(monitor_lines(log)) == 0, "no monitor line with monitor = .false.")
+
+
 def check_polish_accepted(outdir):
     """The polish (SMALBE's exact face solve; with the default polish_first it starts the solve)
     must produce the solution: at least one polish after which the outer stopping test held at
@@ -477,6 +568,12 @@ def main():
             check_reference(outdir, path, groups, float(rest[0]))
         elif kind == "reference_partial":
             check_partly_active(*check_reference(outdir, path, groups, float(rest[0])))
+        elif kind == "monitor":
+            check_monitor(outdir, out)
+        elif kind == "no_monitor":
+            check_no_monitor(out)
+        elif kind == "reason":
+            check_reason(outdir, out, rest[0])
         elif kind == "polish_accepted":
             check_polish_accepted(outdir)
         elif kind == "kkt_failed":
