@@ -56,7 +56,7 @@
 module constraints
   use kinds, only: dp, ip, i8, MPI_INT_IP
   use errors, only: fatal_error
-  use params, only: params_t
+  use feti_settings, only: feti_settings_t
   use decomposition, only: decomposition_t
   use subdomain, only: subdomain_t
   use sorting, only: sort_permutation, sort_unique
@@ -132,8 +132,8 @@ contains
 
   !> Build B, c, the entries of G^T = B R and the exchange pattern for the
   !> local subdomains `subs` (geometry and R^s are needed). Collective over `comm`.
-  subroutine build_constraints(p, dec, subs, comm, con, sub_dec)
-    type(params_t), intent(in) :: p
+  subroutine build_constraints(settings, dec, subs, comm, con, sub_dec)
+    type(feti_settings_t), intent(in) :: settings
     type(decomposition_t), intent(in) :: dec
     type(decomposition_t), intent(in), optional :: sub_dec   !< hybrid TFETI: the subdomains
     type(subdomain_t), intent(in) :: subs(:)
@@ -291,7 +291,7 @@ contains
           gid = subs(ls)%node_gid(a)
           ijk = dec%mesh%node_ijk(gid)
           x = subs(ls)%coords(:, a)
-          call node_conditions(p, dec, ijk, x, dirichlet, value, contact, gap)
+          call node_conditions(settings, dec, ijk, x, dirichlet, value, contact, gap)
           if (present(sub_dec)) then
             call node_copies(sub_dec, dec, gid, reps, copies, merged, member, m)
             if (m == 1 .and. .not. (any(dirichlet) .or. contact)) cycle
@@ -359,10 +359,10 @@ contains
       integer(ip) :: c
       real(dp) :: young, nu
       w = 1
-      if (p%solver%scaling /= 'young') return
+      if (settings%scaling%scaling /= 'young') return
       do c = 1, size(ids, kind=ip)
-        call subdomain_material(p%material, dec, ids(c), young, nu)
-        w(c) = young/p%material%young
+        call subdomain_material(settings%material, dec, ids(c), young, nu)
+        w(c) = young/settings%material%young
       end do
     end subroutine copy_weights
 
@@ -377,8 +377,8 @@ contains
   end subroutine build_constraints
 
   !> Dirichlet components with values, and the contact condition, of a node.
-  subroutine node_conditions(p, dec, ijk, x, dirichlet, value, contact, gap)
-    type(params_t), intent(in) :: p
+  subroutine node_conditions(settings, dec, ijk, x, dirichlet, value, contact, gap)
+    type(feti_settings_t), intent(in) :: settings
     type(decomposition_t), intent(in) :: dec
     integer(ip), intent(in) :: ijk(3)
     real(dp), intent(in) :: x(3)
@@ -388,26 +388,26 @@ contains
 
     dirichlet = .false.
     value = 0
-    if (p%boundary%symmetry_x0 .and. ijk(1) == 0) dirichlet(1) = .true.
-    if (p%boundary%symmetry_y0 .and. ijk(2) == 0) dirichlet(2) = .true.
-    if (p%boundary%top_dirichlet .and. ijk(3) == dec%mesh%ng(3)) then
+    if (settings%boundary%symmetry_x0 .and. ijk(1) == 0) dirichlet(1) = .true.
+    if (settings%boundary%symmetry_y0 .and. ijk(2) == 0) dirichlet(2) = .true.
+    if (settings%boundary%top_dirichlet .and. ijk(3) == dec%mesh%ng(3)) then
       dirichlet = .true.
-      value = p%boundary%top_displacement
+      value = settings%boundary%top_displacement
     end if
     contact = .false.
     gap = 0
     if (ijk(3) /= 0 .or. dirichlet(3)) return
     lx = dec%mesh%lengths(1)
     ly = dec%mesh%lengths(2)
-    select case (p%obstacle%shape)
+    select case (settings%obstacle%shape)
     case ('plane')
       contact = .true.
-      psi = -p%obstacle%gap
+      psi = -settings%obstacle%gap
     case ('sphere')
       r2 = (x(1) - lx/2)**2 + (x(2) - ly/2)**2
-      if (r2 > p%obstacle%radius**2) return
+      if (r2 > settings%obstacle%radius**2) return
       contact = .true.
-      psi = -p%obstacle%radius - p%obstacle%gap + sqrt(p%obstacle%radius**2 - r2)
+      psi = -settings%obstacle%radius - settings%obstacle%gap + sqrt(settings%obstacle%radius**2 - r2)
     case default
       return
     end select

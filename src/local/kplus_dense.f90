@@ -28,7 +28,7 @@
 !> docs/RESULTS.md "Dense local solver"). Memory per subdomain:
 !> n_I (n_I+1)/2 + n_D (n_D+1)/2 values and the nonzeros of K_ID; the
 !> factorization costs n^3/3 flops, so it is meant for small subdomains
-!> (`local_solver = 'auto'` takes it up to `params::dense_max_dofs`).
+!> (`local_solver = 'auto'` takes it up to `local_settings::dense_max_dofs`).
 !> With the fixing block inside D x D (schur_ok), S of K itself is
 !> U_S^T U_S minus that block: `schur_product`, the Dirichlet
 !> preconditioner's local operator at no set-up cost.
