@@ -15,7 +15,7 @@ module contact_run
   use tfeti_dualization, only: tfeti_dualization_t, dual_solution_t
   use feti_operators, only: feti_t
   use contact_summary, only: contact_summary_t, summarize_contact
-  use hdf5_output, only: check_output_directory
+  use run_checks, only: check_run
   use field_output, only: write_run_fields
   use run_report, only: write_run_report, log_where_to_look
   use report, only: print_timing_table
@@ -47,7 +47,7 @@ contains
     character(len=200) :: line
     integer :: ierr
 
-    if (p%output%write_hdf5 .or. p%output%write_report) call check_output_directory(comm, p%output%directory)
+    call check_run(p, comm)        ! what --check checks: output folder, ranks, coarse groups; memory estimate
     call MPI_Barrier(comm, ierr)
     call timer_start('total')
     ! 1. set-up: mesh, assembly, K^+, B and G, coarse problem, d, e, lambda~, ||P F P||, the dual QP

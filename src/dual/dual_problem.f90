@@ -69,7 +69,6 @@ module dual_problem
     !> up to date (track_*): then eq_residual costs no coarse solve.
     real(dp), allocatable, private :: last_g(:), last_z(:), x_g(:), x_z(:)
     logical, private :: last_valid = .false., x_valid = .false.
-    integer(ip) :: tracked_residuals = 0       !< eq_residual calls answered from the tracking
     !> smallest force scale / E of eq_measure: the forces a displacement of the
     !> data's size makes, max_s max|K_s| / E_s x (stop_scale s)
     real(dp), private :: force_floor = 0
@@ -160,7 +159,6 @@ contains
               self%x_z(op%n_coarse()))
     self%last_valid = .false.
     self%x_valid = .false.
-    self%tracked_residuals = 0
     self%n_products = 0
     call self%prepare()
     ! b = P (d - F lambda~)
@@ -530,9 +528,7 @@ contains
     real(dp), intent(out) :: cnorm
     real(dp) :: mine, total
     integer :: ierr
-    if (self%x_valid) then
-      self%tracked_residuals = self%tracked_residuals + 1
-    else
+    if (.not. self%x_valid) then
       call self%op%apply_g(x, self%x_g)
       call self%op%coarse_solve(self%x_g, self%x_z)
       self%x_valid = .true.

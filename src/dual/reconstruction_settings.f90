@@ -9,7 +9,7 @@ module reconstruction_settings
   private
 
   type, public :: reconstruction_settings_t
-    character(len=name_len) :: method = 'both'  !< 'new' | 'standard' | 'both'
+    character(len=name_len) :: method = 'both'  !< 'multiplier' (Eq. 24/25) | 'standard' (Eq. 10) | 'both'
     real(dp) :: active_tol = 1.0e-8_dp  !< contact row active if lambda > active_tol max(lambda)
     real(dp) :: kkt_tol = 1.0e-3_dp  !< largest KKT residual accepted
   contains
@@ -28,8 +28,10 @@ contains
     variable = ''
     rule = ''
     got = ''
-    if (.not. any(self%method == [character(len=8) :: 'new', 'standard', 'both'])) then
-      call bad('method', "must be 'new', 'standard' or 'both'", self%method)
+    if (self%method == 'new') then
+      call bad('method', "'new' is now spelled 'multiplier' (alpha_bar from SMALBE's multiplier, Eq. 24/25)", self%method)
+    else if (.not. any(self%method == [character(len=10) :: 'multiplier', 'standard', 'both'])) then
+      call bad('method', "must be 'multiplier', 'standard' or 'both'", self%method)
     else if (self%active_tol < 0 .or. self%active_tol >= 1) then
       call bad('active_tol', 'must be in [0, 1)', reals_text([self%active_tol]))
     else if (self%kkt_tol <= 0) then

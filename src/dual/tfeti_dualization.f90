@@ -42,7 +42,7 @@ module tfeti_dualization
     private
     type(feti_t) :: op
     type(dual_problem_t) :: hat                        !< hat form: (G G^T)^{-1} by MUMPS
-    type(dual_problem_orth_t) :: orth                  !< explicit G~ (&solver coarse = 'cholesky')
+    type(dual_problem_orth_t) :: orth                  !< explicit G~ (&solver coarse = 'orthonormal')
     class(dual_problem_t), pointer :: dual => null()   !< the one of the two in use
     character(len=name_len) :: method = 'both'         !< &reconstruction method
     real(dp) :: active_tol = 0
@@ -81,7 +81,7 @@ contains
     call this%free()
     this%method = reconstruction%method
     this%active_tol = reconstruction%active_tol
-    if (feti%coarse%coarse == 'cholesky') call check_orthonormal_size(product(feti%mesh%nsub), comm)
+    if (feti%coarse%coarse == 'orthonormal') call check_orthonormal_size(product(feti%mesh%nsub), comm)
     call this%op%setup(feti, comm)
     call MPI_Comm_size(comm, nranks, ierr)
     n = this%op%sizes()
@@ -92,7 +92,7 @@ contains
       ', Dirichlet ', n%dirichlet_rows, ', contact ', n%contact_rows, '), coarse dimension ', n%coarse_dim
     call log_message(line)
     call timer_start('dual setup')
-    if (feti%coarse%coarse == 'cholesky') then
+    if (feti%coarse%coarse == 'orthonormal') then
       this%dual => this%orth
     else
       this%dual => this%hat
@@ -219,7 +219,7 @@ contains
     a_new = 0
     a_std = 0
     if (this%method /= 'standard') call this%dual%alpha_bar(g, mu_scaled, a_new)   ! Eq. 24 or 25
-    if (this%method /= 'new') then
+    if (this%method /= 'multiplier') then
       call alpha_standard(this%op, sol%lambda, g, this%active_tol, a_std, sol%standard_cost)
       write (line, '(a,3(es10.3,a))') 'standard formula: assembly ', sol%standard_cost%assembly, &
         ' s, factorization ', sol%standard_cost%factorization, ' s, solve ', sol%standard_cost%solve, ' s'

@@ -35,8 +35,10 @@ contains
     variable = ''
     rule = ''
     got = ''
-    if (.not. any(self%coarse == [character(len=8) :: 'mumps', 'cholesky'])) then
-      call bad('coarse', "must be 'mumps' or 'cholesky'", self%coarse)
+    if (self%coarse == 'cholesky') then
+      call bad('coarse', "'cholesky' is now spelled 'orthonormal' (the explicit orthonormal G~)", self%coarse)
+    else if (.not. any(self%coarse == [character(len=11) :: 'mumps', 'orthonormal'])) then
+      call bad('coarse', "must be 'mumps' or 'orthonormal'", self%coarse)
     else if (.not. any(self%coarse_placement == [character(len=12) :: 'auto', 'redundant', 'distributed'])) then
       call bad('coarse_placement', "must be 'auto', 'redundant' or 'distributed'", self%coarse_placement)
     else if (self%coarse_ranks < 0) then

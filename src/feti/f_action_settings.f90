@@ -1,5 +1,5 @@
 !> The settings of the F action (`&solver` variables f_action, f_storage,
-!> power_iterations; docs/INPUT.md): how F = B K^+ B^T is applied and stored,
+!> lanczos_steps; docs/INPUT.md): how F = B K^+ B^T is applied and stored,
 !> and the cap of the Lanczos steps that estimate ||P F P||. The one home of
 !> their defaults, ranges and namelist variables; used by feti_builder.
 module f_action_settings
@@ -12,7 +12,7 @@ module f_action_settings
     !> how F is applied: 'implicit' (K^+ solves) | 'explicit' (dense local
     character(len=name_len) :: f_action = 'auto'  !< operators, BLAS) | 'auto' (the cheaper one by the measured cost model)
     character(len=name_len) :: f_storage = 'packed'  !< explicit F: 'packed' | 'symmetric' | 'general'
-    integer(ip) :: power_iterations = 50  !< cap of the ||P F P|| Lanczos steps
+    integer(ip) :: lanczos_steps = 50  !< cap of the ||P F P|| Lanczos steps
   contains
     procedure :: check => f_action_settings_check
     procedure :: read_namelist => f_action_settings_read
@@ -33,8 +33,8 @@ contains
       call bad('f_action', "must be 'implicit', 'explicit' or 'auto'", self%f_action)
     else if (.not. any(self%f_storage == [character(len=10) :: 'symmetric', 'packed', 'general'])) then
       call bad('f_storage', "must be 'symmetric', 'packed' or 'general'", self%f_storage)
-    else if (self%power_iterations < 1) then
-      call bad('power_iterations', 'must be >= 1', ints_text([self%power_iterations]))
+    else if (self%lanczos_steps < 1) then
+      call bad('lanczos_steps', 'must be >= 1', ints_text([self%lanczos_steps]))
     end if
   contains
     subroutine bad(name, text, value)
@@ -53,13 +53,13 @@ contains
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
     character(len=name_len) :: f_action, f_storage
-    integer(ip) :: power_iterations
-    namelist /solver/ f_action, f_storage, power_iterations
-    f_action = self%f_action; f_storage = self%f_storage; power_iterations = self%power_iterations
+    integer(ip) :: lanczos_steps
+    namelist /solver/ f_action, f_storage, lanczos_steps
+    f_action = self%f_action; f_storage = self%f_storage; lanczos_steps = self%lanczos_steps
     read (group, nml=solver, iostat=status, iomsg=msg)
     if (status /= 0) return
     self%f_action = lower_case(f_action); self%f_storage = lower_case(f_storage)
-    self%power_iterations = power_iterations
+    self%lanczos_steps = lanczos_steps
   end subroutine f_action_settings_read
 
   !> Write this component's variables as the namelist '&solver ... /' (strings quoted).
@@ -69,9 +69,9 @@ contains
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
     character(len=name_len) :: f_action, f_storage
-    integer(ip) :: power_iterations
-    namelist /solver/ f_action, f_storage, power_iterations
-    f_action = self%f_action; f_storage = self%f_storage; power_iterations = self%power_iterations
+    integer(ip) :: lanczos_steps
+    namelist /solver/ f_action, f_storage, lanczos_steps
+    f_action = self%f_action; f_storage = self%f_storage; lanczos_steps = self%lanczos_steps
     lines = ''
     write (lines, nml=solver, delim='quote', iostat=status, iomsg=msg)
   end subroutine f_action_settings_write

@@ -40,31 +40,7 @@ contains
     call check_coarse_ranks()
 
     call timer_start('mesh')
-    this%hybrid = is_hybrid(settings%mesh)
-    if (this%hybrid) then
-      ! hybrid TFETI: the units are the clusters (src/mesh/clusters.f90)
-      call build_decomposition(settings%mesh, comm, this%sub_dec)
-      call build_decomposition(unit_mesh(settings%mesh), comm, this%dec)
-    else
-      call build_decomposition(settings%mesh, comm, this%dec)
-    end if
-    this%n_local_subs = size(this%dec%local_subdomains, kind=ip)
-    allocate (this%subs(this%n_local_subs))
-    do ls = 1, this%n_local_subs
-      if (this%hybrid) then
-        call build_cluster(this%sub_dec, this%dec, this%dec%local_subdomains(ls), this%subs(ls))
-      else
-        call build_subdomain(this%dec, this%dec%local_subdomains(ls), this%subs(ls))
-      end if
-    end do
-    if (this%hybrid) then
-      block
-        character(len=200) :: line
-        write (line, '(a,i0,a,i0,a,3(1x,i0),a)') 'hybrid TFETI: ', this%sub_dec%nsubdomains, ' subdomains in ', &
-          this%dec%nsubdomains, ' clusters of', settings%mesh%cluster, ' (corners assembled inside a cluster)'
-        call log_message(line)
-      end block
-    end if
+    call build_units(this, settings, comm)
     call timer_stop('mesh')
     call memory_mark('mesh')
 
@@ -151,6 +127,68 @@ contains
     call memory_mark('coarse setup')
 
     call timer_start('dual setup')
+    call dual_data(this, comm)
+    call estimate_norm_pfp(this, settings%f_action%lanczos_steps, lanczos_setup_steps)
+    call timer_stop('dual setup')
+    call memory_mark('dual setup')
+
+  contains
+
+    !> &solver coarse_ranks against the number of ranks, before any set-up
+    !> work (the projector applies the same rule). Collective.
+    subroutine check_coarse_ranks()
+      integer :: nranks, c
+      character(len=300) :: msg
+      call MPI_Comm_size(comm, nranks, ierr)
+      ! units = clusters; an unresolved automatic cluster 0,0,0 (settings made in code) is plain TFETI
+      call choose_coarse_ranks(settings%coarse%coarse_ranks, settings%coarse%coarse_placement, nranks, &
+                               int(product(int(settings%mesh%nsub/max(settings%mesh%cluster, 1_ip), i8)), ip), c, msg)
+      if (len_trim(msg) > 0) call collective_error(msg, comm, exit_input_error)
+    end subroutine check_coarse_ranks
+  end subroutine setup
+
+  !> The decomposition and the local units (subdomains, or clusters of them
+  !> with hybrid TFETI, `&mesh cluster`) with their geometry.
+  subroutine build_units(this, settings, comm)
+    class(feti_t), intent(inout) :: this
+    type(feti_settings_t), intent(in) :: settings
+    type(MPI_Comm), intent(in) :: comm
+    integer(ip) :: ls
+    this%hybrid = is_hybrid(settings%mesh)
+    if (this%hybrid) then
+      ! hybrid TFETI: the units are the clusters (src/mesh/clusters.f90)
+      call build_decomposition(settings%mesh, comm, this%sub_dec)
+      call build_decomposition(unit_mesh(settings%mesh), comm, this%dec)
+    else
+      call build_decomposition(settings%mesh, comm, this%dec)
+    end if
+    this%n_local_subs = size(this%dec%local_subdomains, kind=ip)
+    allocate (this%subs(this%n_local_subs))
+    do ls = 1, this%n_local_subs
+      if (this%hybrid) then
+        call build_cluster(this%sub_dec, this%dec, this%dec%local_subdomains(ls), this%subs(ls))
+      else
+        call build_subdomain(this%dec, this%dec%local_subdomains(ls), this%subs(ls))
+      end if
+    end do
+    if (this%hybrid) then
+      block
+        character(len=200) :: line
+        write (line, '(a,i0,a,i0,a,3(1x,i0),a)') 'hybrid TFETI: ', this%sub_dec%nsubdomains, ' subdomains in ', &
+          this%dec%nsubdomains, ' clusters of', settings%mesh%cluster, ' (corners assembled inside a cluster)'
+        call log_message(line)
+      end block
+    end if
+  end subroutine build_units
+
+  !> The dual data: d = B K^+ f - c, e = R^T f, lambda~ = G^T (G G^T)^{-1} e
+  !> (with a check of the coarse solve's accuracy, logged), the contact rows
+  !> and their lower bounds -lambda~. Collective over `comm`.
+  subroutine dual_data(this, comm)
+    class(feti_t), intent(inout) :: this
+    type(MPI_Comm), intent(in) :: comm
+    integer(ip) :: ls, r(2)
+    integer :: ierr
     associate (n => this%b%n_own())
       allocate (this%d(n), this%lambda_tilde(n), this%lower(n), this%contact(n), this%e(6*this%n_local_subs))
       ! d = B K^+ f - c, e = R^T f
@@ -187,24 +225,7 @@ contains
       this%lower = -huge(1.0_dp)
       where (this%contact) this%lower = -this%lambda_tilde
     end associate
-    call estimate_norm_pfp(this, settings%f_action%power_iterations, lanczos_setup_steps)
-    call timer_stop('dual setup')
-    call memory_mark('dual setup')
-
-  contains
-
-    !> &solver coarse_ranks against the number of ranks, before any set-up
-    !> work (the projector applies the same rule). Collective.
-    subroutine check_coarse_ranks()
-      integer :: nranks, c
-      character(len=300) :: msg
-      call MPI_Comm_size(comm, nranks, ierr)
-      ! units = clusters; an unresolved automatic cluster 0,0,0 (settings made in code) is plain TFETI
-      call choose_coarse_ranks(settings%coarse%coarse_ranks, settings%coarse%coarse_placement, nranks, &
-                               int(product(int(settings%mesh%nsub/max(settings%mesh%cluster, 1_ip), i8)), ip), c, msg)
-      if (len_trim(msg) > 0) call collective_error(msg, comm, exit_input_error)
-    end subroutine check_coarse_ranks
-  end subroutine setup
+  end subroutine dual_data
 
   !> `&solver f_action`: build the explicit local operators for 'explicit',
   !> or for 'auto' when the cost model says they pay (the same choice on all

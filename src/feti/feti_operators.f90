@@ -326,7 +326,7 @@ contains
                                   force_low_rank)
   end function masked_coarse
 
-  !> The explicit G~ = L^{-1} G of `&solver coarse = 'cholesky'`. Collective.
+  !> The explicit G~ = L^{-1} G of `&solver coarse = 'orthonormal'`. Collective.
   subroutine init_orthonormal(this, orth)
     class(feti_t), intent(inout) :: this
     type(orthonormal_coarse_t), intent(inout) :: orth

@@ -396,7 +396,7 @@ contains
     call this%masked%make_view(this%coarse, keys, pos, g)
   end subroutine schur_view
 
-  !> The explicit G~ = L^{-1} G of `&solver coarse = 'cholesky'`. Collective.
+  !> The explicit G~ = L^{-1} G of `&solver coarse = 'orthonormal'`. Collective.
   subroutine init_orthonormal(this, dec, b, orth)
     class(projector_t), intent(in) :: this
     type(decomposition_t), intent(in) :: dec

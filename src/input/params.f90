@@ -51,6 +51,11 @@ module params
 
   integer, parameter :: max_values = 3      !< the most values of one variable (arrays of 3)
 
+  !> Variables that were renamed: 'group old new'. The old spelling is
+  !> refused with a message that names the new one (never read silently).
+  character(len=*), parameter :: renamed_variables(1) = [character(len=48) :: &
+    'solver power_iterations lanczos_steps']
+
   !> One variable of a group as the namelist writes it (param_items).
   type, public :: param_item_t
     character(len=name_len) :: name = ''                !< lower case
@@ -150,7 +155,8 @@ contains
         return
       end if
       seen(i) = .true.
-      call read_group_checked(name, group_text, p, status, msg)
+      call check_renamed(name, group_text, status, msg)
+      if (status == 0) call read_group_checked(name, group_text, p, status, msg)
       if (status == 0) call check_assignments(name, group_text, p, status, msg)
       if (status /= 0) then
         msg = 'file '//trim(file)//', group &'//name//': '//trim(msg)
@@ -387,6 +393,38 @@ contains
       end do
     end function count_values
   end subroutine check_assignments
+
+  !> Refuse the old spelling of a renamed variable (renamed_variables) in
+  !> group `name`, with a message that names the new one.
+  subroutine check_renamed(name, group_text, status, msg)
+    character(len=*), intent(in) :: name, group_text
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    character(len=48) :: group, old, new, entry
+    character(len=:), allocatable :: body, lhs
+    integer, allocatable :: starts(:)
+    integer :: k, i, r, nstarts, body_start
+    status = 0
+    msg = ''
+    body_start = index(group_text, ' ')
+    if (body_start == 0) return
+    body = group_text(body_start:len(group_text) - 1)
+    call assignment_starts(body, starts, nstarts)
+    do k = 1, nstarts
+      i = index(body(starts(k):), '=')
+      if (i == 0) cycle
+      lhs = lower(trim(adjustl(body(starts(k):starts(k) + i - 2))))
+      if (index(lhs, '(') > 0) lhs = trim(lhs(1:index(lhs, '(') - 1))
+      do r = 1, size(renamed_variables)
+        entry = renamed_variables(r)
+        read (entry, *) group, old, new
+        if (trim(group) /= name .or. trim(old) /= lhs) cycle
+        status = 1
+        msg = 'variable '//lhs//': renamed '//trim(new)//' (write '//trim(new)//' = ... instead)'
+        return
+      end do
+    end do
+  end subroutine check_renamed
 
   !> Read one group; on failure find the assignment at fault.
   subroutine read_group_checked(name, group_text, p, status, msg)
