@@ -87,8 +87,6 @@ module dual_problem
     !> rows): the FETI operators' reusable masked instance (one MUMPS analysis
     !> per run, a numerical factorization per face; feti_t%masked_coarse)
     type(coarse_problem_t), pointer, private :: face_cp => null()
-    !> the face solve uses face_operator_lazy (tests compare with .false.: face_operator)
-    logical :: lazy_face = .true.
     logical, private :: face_ready = .false.
   contains
     procedure :: init
@@ -368,7 +366,7 @@ contains
   !> The face solve may use face_operator_lazy wherever it polishes.
   logical function face_lazy(self)
     class(dual_problem_t), intent(in) :: self
-    face_lazy = self%lazy_face .and. self%has_face_solver()
+    face_lazy = self%has_face_solver()
   end function face_lazy
 
   !> q = F p / s for p in Ker G: A p = P F p / s plus G^T (G G^T)^{-1} G F p / s,
