@@ -2,6 +2,7 @@
 """Run two feticontact binaries on the same inputs and compare the results exactly.
 
     tools/compare_runs.py BIN_A BIN_B INPUT.nml [INPUT.nml ...] [--ranks 2] [--work DIR]
+                          [--renamed /case/GROUP/OLD=/case/GROUP/NEW ...]
 
 Each input is run by both binaries (`mpirun --bind-to none -n RANKS`) into its
 own output directory (the `&output directory` of the input is replaced). Then
@@ -9,7 +10,8 @@ own output directory (the `&output directory` of the input is replaced). Then
   and machine sections (`timings`, `memory`, `blas`, `performance`, keys with
   `seconds`, `bandwidth`, `time`, the reconstruction's phase times) must be
   equal (counts, KKT residuals, histories, ...); settings that only binary B
-  echoes (new options) are left out;
+  echoes (new options) are left out, a setting B renamed (--renamed) is
+  compared under its new name;
 - every HDF5 dataset of the run must be bit-identical (numpy.array_equal on
   the raw arrays, NaN included).
 Prints one line per input and exits 1 if any differs.
@@ -90,10 +92,15 @@ def flatten(obj, prefix=''):
         yield prefix, obj
 
 
-def compare_reports(a, b):
+def compare_reports(a, b, renamed=()):
+    """Differences between two report.json; `renamed`: (key in A, key in B) pairs of a
+    setting that binary B spells differently (compared under B's key)."""
     diffs = []
     fa = dict(flatten(json.load(open(a))))
     fb = dict(flatten(json.load(open(b))))
+    for old, new in renamed:
+        if old in fa:
+            fa[new] = fa.pop(old)
     for k in sorted(set(fa) | set(fb)):
         if k.startswith('/case/') and k not in fa:
             continue    # a setting that binary A does not have (a new option, echoed with its default)
@@ -137,6 +144,9 @@ def main():
     ap.add_argument('inputs', nargs='+')
     ap.add_argument('--ranks', type=int, default=2)
     ap.add_argument('--work', default='compare_runs', help='folder for the runs (default: ./compare_runs)')
+    ap.add_argument('--renamed', action='append', default=[], metavar='OLD=NEW',
+                    help='a report.json key that binary B renamed, e.g. /case/solver/power_iterations='
+                         '/case/solver/lanczos_steps (repeatable)')
     args = ap.parse_args()
     bad = 0
     for nml in args.inputs:
@@ -150,7 +160,7 @@ def main():
         rep = [os.path.join(d, 'report.json') for d in dirs]
         info = ''
         if all(os.path.exists(r) for r in rep):
-            d, flat = compare_reports(*rep)
+            d, flat = compare_reports(*rep, renamed=[tuple(r.split('=', 1)) for r in args.renamed])
             diffs += d
             info = 'hessian %s outer %s' % (flat.get('/solver/hessian_multiplications'),
                                              flat.get('/solver/outer_iterations'))

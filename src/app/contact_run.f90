@@ -9,12 +9,13 @@ module contact_run
   use logger, only: log_section, log_message
   use timers, only: timer_start, timer_stop, timers_reduce, timer_stat_t
   use memory_marks, only: memory_mark
-  use params, only: params_t
+  use params, only: params_t, feti_settings_of
+  use input_report, only: run_case_of
   use smalbe, only: smalbe_t
   use tfeti_dualization, only: tfeti_dualization_t, dual_solution_t
   use feti_operators, only: feti_t
   use contact_summary, only: contact_summary_t, summarize_contact
-  use hdf5_output, only: check_output_directory
+  use run_checks, only: check_run
   use field_output, only: write_run_fields
   use run_report, only: write_run_report, log_where_to_look
   use report, only: print_timing_table
@@ -47,16 +48,16 @@ contains
     character(len=200) :: line
     integer :: ierr
 
+    call check_run(p, comm)        ! what --check checks: output folder, ranks, coarse groups; memory estimate
     if (p%history%is_history()) then
       ! &history: one set-up, a solve per step (load_history)
       call run_load_history(p, comm, status)
       return
     end if
-    if (p%output%write_hdf5 .or. p%output%write_report) call check_output_directory(comm, p%output%directory)
     call MPI_Barrier(comm, ierr)
     call timer_start('total')
     ! 1. set-up: mesh, assembly, K^+, B and G, coarse problem, d, e, lambda~, ||P F P||, the dual QP
-    call dual%setup(p, comm)
+    call dual%setup(feti_settings_of(p), p%solver%dual, p%solver%preconditioner, p%reconstruction, comm)
     call memory_mark('dual QP setup')
     ! 2. solve: SMALBE (outer) + MPRGP (inner) on the dual QP
     call log_section('SMALBE / MPRGP')
@@ -82,7 +83,8 @@ contains
     call timers_reduce(comm, stats)
     call log_section('Timings [s] (min / max / mean over ranks)')
     call print_timing_table(stats)
-    if (p%output%write_report) call write_run_report(p, dual, solver, sol, contact, stats, seconds)
+    if (p%output%write_report) call write_run_report(run_case_of(p), p%output, p%reconstruction, &
+                                                        dual, solver, sol, contact, stats, seconds)
 
     status = 0
     if (.not. solver%converged()) then
@@ -96,7 +98,7 @@ contains
     else
       call log_message('feticontact: converged, KKT check passed')
     end if
-    call log_where_to_look(p)
+    call log_where_to_look(p%output, p%obstacle%shape == 'sphere')
     call dual%free()
   end subroutine run_contact_case
 end module contact_run

@@ -1,7 +1,9 @@
 !> feticontact: frictionless contact of 3D linear elasticity by TFETI.
 !>
 !> Usage: mpirun -n P feticontact [--check] input.nml
-!>   --check  read and check the input, echo the settings, and exit.
+!>   --check  read and check the input, echo the settings, make the checks a
+!>            run makes before its set-up (output folder, ranks against
+!>            subdomains, coarse groups), print a memory estimate, and exit.
 !>        feticontact --version: the version and the git commit of the build.
 !> Environment: FETICONTACT_BLAS_THREADS = BLAS threads per rank (default 1;
 !> see blas_threads and docs/INPUT.md).
@@ -14,6 +16,7 @@ program feticontact
   use logger, only: logger_init, log_section, log_message, log_is_root
   use params, only: params_t, read_params, echo_params, input_warnings
   use contact_run, only: run_contact_case
+  use run_checks, only: check_run
   use blas_threads, only: blas_threads_setup, blas_log_line
   use memory_marks, only: memory_mark
   use mpi_f08, only: MPI_Init, MPI_Finalize, MPI_COMM_WORLD, MPI_Comm_size
@@ -82,7 +85,10 @@ program feticontact
   end do
 
   if (.not. check_only) call run_contact_case(p, MPI_COMM_WORLD, status)
-  if (check_only) call log_message('input checked: OK')
+  if (check_only) then
+    call check_run(p, MPI_COMM_WORLD)
+    call log_message('input checked: OK')
+  end if
   call MPI_Finalize(ierr)
   if (status /= 0) call exit_process(status)
 end program feticontact

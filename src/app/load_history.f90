@@ -15,7 +15,8 @@ module load_history
   use logger, only: log_section, log_message
   use timers, only: timer_start, timer_stop, timers_reduce, timer_stat_t, timer_seconds
   use memory_marks, only: memory_mark
-  use params, only: params_t, param_items, param_item_t, group_names
+  use params, only: params_t, param_items, param_item_t, group_names, feti_settings_of
+  use input_report, only: run_case_of
   use smalbe, only: smalbe_t
   use tfeti_dualization, only: tfeti_dualization_t, dual_solution_t
   use feti_operators, only: feti_t, feti_sizes_t
@@ -74,7 +75,7 @@ contains
     call MPI_Barrier(comm, ierr)
     t_start = MPI_Wtime()
     call timer_start('total')
-    call dual%setup(p, comm)
+    call dual%setup(feti_settings_of(p), p%solver%dual, p%solver%preconditioner, p%reconstruction, comm)
     call dual%prepare_history()
     call memory_mark('dual QP setup')
     op => dual%operators()
@@ -196,9 +197,10 @@ contains
     call print_timing_table(stats)
     call log_history_summary(records)
     if (p%output%write_report .and. size(records) > 0 .and. allocated(sol%lambda)) &
-      call write_run_report(p, dual, solver, sol, contact, stats, last_seconds, history_json(records))
+      call write_run_report(run_case_of(p), p%output, p%reconstruction, dual, solver, sol, contact, stats, &
+                                                  last_seconds, history_json(records))
     if (status == 0) call log_message('feticontact: history done, every step converged, KKT check passed')
-    call log_where_to_look(p)
+    call log_where_to_look(p%output, p%obstacle%shape == 'sphere')
     call dual%free()
   end subroutine run_load_history
 

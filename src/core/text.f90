@@ -1,10 +1,10 @@
 !> Numbers as text, the one place for it (i0 formatting), and lower case.
 module text
-  use kinds, only: ip, i8
+  use kinds, only: dp, ip, i8
   implicit none
   private
 
-  public :: str, lower_case, counted
+  public :: str, lower_case, counted, ints_text, reals_text
 
   !> `n` in decimal, no blanks.
   interface str
@@ -54,4 +54,22 @@ contains
       if (c >= iachar('A') .and. c <= iachar('Z')) r(i:i) = achar(c + 32)
     end do
   end function lower_case
+
+  !> The values of v separated by blanks (for messages).
+  function ints_text(v) result(s)
+    integer(ip), intent(in) :: v(:)
+    character(len=:), allocatable :: s
+    character(len=256) :: buf
+    write (buf, '(*(i0,:," "))') v
+    s = trim(buf)
+  end function ints_text
+
+  !> The values of v separated by blanks, 6 significant digits (for messages).
+  function reals_text(v) result(s)
+    real(dp), intent(in) :: v(:)
+    character(len=:), allocatable :: s
+    character(len=256) :: buf
+    write (buf, '(*(g0.6,:," "))') v
+    s = trim(buf)
+  end function reals_text
 end module text

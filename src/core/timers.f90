@@ -200,23 +200,8 @@ contains
     end do
     call union_of_paths(comm, local, keys)
     n = size(keys)
-    allocate (labels(n), up(n), row_of(n), phase_of(n), phase_names(n))
-    ! each path's parent and label; parents come before their children in `keys`
-    up = 0
-    do k = 1, n
-      j = index(keys(k), separator, back=.true.)
-      if (j == 0) then
-        labels(k) = keys(k)(1:name_len)
-      else
-        labels(k) = keys(k)(j + len(separator):)
-        do i = k - 1, 1, -1
-          if (keys(i) == keys(k)(1:j - 1)) then
-            up(k) = i
-            exit
-          end if
-        end do
-      end if
-    end do
+    allocate (row_of(n), phase_of(n), phase_names(n))
+    call path_parents(keys, labels, up)
     ! rows of the tree, depth first; an `other` row (order = -parent) after each parent's sub-rows
     allocate (order(2*n))
     ntree = 0
@@ -334,6 +319,31 @@ contains
       under_same_label = .false.
     end function under_same_label
   end subroutine timers_reduce
+
+  !> Each path's label (its last name) and parent (its position in `keys`,
+  !> 0 for a root); parents come before their children in `keys`.
+  subroutine path_parents(keys, labels, up)
+    character(len=*), intent(in) :: keys(:)
+    character(len=name_len), allocatable, intent(out) :: labels(:)
+    integer, allocatable, intent(out) :: up(:)
+    integer :: i, j, k
+    allocate (labels(size(keys)), up(size(keys)))
+    up = 0
+    do k = 1, size(keys)
+      j = index(keys(k), separator, back=.true.)
+      if (j == 0) then
+        labels(k) = keys(k)(1:name_len)
+      else
+        labels(k) = keys(k)(j + len(separator):)
+        do i = k - 1, 1, -1
+          if (keys(i) == keys(k)(1:j - 1)) then
+            up(k) = i
+            exit
+          end if
+        end do
+      end if
+    end do
+  end subroutine path_parents
 
   !> The paths of every rank (`local`: this rank's), the same list on all:
   !> rank 0's in the order it created them, then those only other ranks have

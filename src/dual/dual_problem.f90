@@ -69,7 +69,6 @@ module dual_problem
     !> up to date (track_*): then eq_residual costs no coarse solve.
     real(dp), allocatable, private :: last_g(:), last_z(:), x_g(:), x_z(:)
     logical, private :: last_valid = .false., x_valid = .false.
-    integer(ip) :: tracked_residuals = 0       !< eq_residual calls answered from the tracking
     !> smallest force scale / E of eq_measure: the forces a displacement of the
     !> data's size makes, max_s max|K_s| / E_s x (stop_scale s)
     real(dp), private :: force_floor = 0
@@ -88,8 +87,6 @@ module dual_problem
     !> rows): the FETI operators' reusable masked instance (one MUMPS analysis
     !> per run, a numerical factorization per face; feti_t%masked_coarse)
     type(coarse_problem_t), pointer, private :: face_cp => null()
-    !> the face solve uses face_operator_lazy (tests compare with .false.: face_operator)
-    logical :: lazy_face = .true.
     logical, private :: face_ready = .false.
     logical, private :: stop_violation = .true.   !< &solver stopping = 'violation'
   contains
@@ -156,7 +153,6 @@ contains
               self%x_z(op%n_coarse()))
     self%last_valid = .false.
     self%x_valid = .false.
-    self%tracked_residuals = 0
     self%n_products = 0
     call self%prepare()
     self%stop_violation = .true.
@@ -385,7 +381,7 @@ contains
   !> The face solve may use face_operator_lazy wherever it polishes.
   logical function face_lazy(self)
     class(dual_problem_t), intent(in) :: self
-    face_lazy = self%lazy_face .and. self%has_face_solver()
+    face_lazy = self%has_face_solver()
   end function face_lazy
 
   !> q = F p / s for p in Ker G: A p = P F p / s plus G^T (G G^T)^{-1} G F p / s,
@@ -545,9 +541,7 @@ contains
     real(dp), intent(out) :: cnorm
     real(dp) :: mine, total
     integer :: ierr
-    if (self%x_valid) then
-      self%tracked_residuals = self%tracked_residuals + 1
-    else
+    if (.not. self%x_valid) then
       call self%op%apply_g(x, self%x_g)
       call self%op%coarse_solve(self%x_g, self%x_z)
       self%x_valid = .true.

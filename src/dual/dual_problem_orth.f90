@@ -1,5 +1,5 @@
 !> The TFETI dual contact problem of the paper, Eq. (8), as a QP with the
-!> equality constraint orthonormalized explicitly (`&solver coarse = 'cholesky'`):
+!> equality constraint orthonormalized explicitly (`&solver coarse = 'orthonormal'`):
 !>
 !>   min 1/2 nu^T (P F P + rho Q) nu - nu^T P (d - F lambda~)
 !>   s.t. nu_I >= -lambda~_I  and  G~ nu = o,  G~ = L^{-1} G,  G G^T = L L^T,

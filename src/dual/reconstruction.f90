@@ -11,7 +11,7 @@
 !> - standard (Eq. 10): A = equality rows + contact rows with lambda_i >
 !>   active_tol * max(lambda_I); G_A G_A^T assembled anew (distributed) and
 !>   factorized by MUMPS, alpha_bar = (G_A G_A^T)^{-1} G_A g_A;
-!> - new with the explicit G~ = L^{-1} G (Eq. 25, &solver coarse = 'cholesky',
+!> - new with the explicit G~ = L^{-1} G (Eq. 25, &solver coarse = 'orthonormal',
 !>   mu carried directly): in the orthonormalized basis R~ = R L^{-T} of the
 !>   kernel (B R~ = G~^T, G~ G~^T = I) Eq. 14 reads alpha~ = G~ g (one
 !>   MPI_Allreduce of 6N values) and Eq. 25 is alpha~_bar = alpha~ - mu, a

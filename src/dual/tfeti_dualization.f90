@@ -10,7 +10,10 @@ module tfeti_dualization
   use kinds, only: dp, name_len, MPI_REAL_DP
   use logger, only: log_section, log_message
   use timers, only: timer_start, timer_stop, timer_seconds
-  use params, only: params_t, solver_params_t
+  use feti_settings, only: feti_settings_t
+  use dual_settings, only: dual_settings_t
+  use preconditioner_settings, only: preconditioner_settings_t
+  use reconstruction_settings, only: reconstruction_settings_t
   use feti_operators, only: feti_t, local_field_t, feti_sizes_t
   use subdomain, only: subdomain_t
   use orthonormal_coarse, only: check_orthonormal_size
@@ -39,7 +42,7 @@ module tfeti_dualization
     private
     type(feti_t) :: op
     type(dual_problem_t) :: hat                        !< hat form: (G G^T)^{-1} by MUMPS
-    type(dual_problem_orth_t) :: orth                  !< explicit G~ (&solver coarse = 'cholesky')
+    type(dual_problem_orth_t) :: orth                  !< explicit G~ (&solver coarse = 'orthonormal')
     class(dual_problem_t), pointer :: dual => null()   !< the one of the two in use
     character(len=name_len) :: method = 'both'         !< &reconstruction method
     real(dp) :: active_tol = 0
@@ -65,11 +68,16 @@ module tfeti_dualization
 
 contains
 
-  !> Build the FETI operators and the dual QP of the case `p` on `comm`.
-  !> `this` must be a target (the dual problem points to its operators).
-  subroutine setup(this, p, comm)
+  !> Build the FETI operators (`feti`) and the dual QP (`dual`, its
+  !> `preconditioner`) on `comm`; keep what the reconstruction needs
+  !> (`reconstruction`). `this` must be a target (the dual problem points to
+  !> its operators).
+  subroutine setup(this, feti, dual, preconditioner, reconstruction, comm)
     class(tfeti_dualization_t), intent(inout), target :: this
-    type(params_t), intent(in) :: p
+    type(feti_settings_t), intent(in) :: feti
+    type(dual_settings_t), intent(in) :: dual
+    type(preconditioner_settings_t), intent(in) :: preconditioner
+    type(reconstruction_settings_t), intent(in) :: reconstruction
     type(MPI_Comm), intent(in) :: comm
     type(feti_sizes_t) :: n
     character(len=200) :: line
@@ -77,10 +85,10 @@ contains
     integer :: nranks, ierr
 
     call this%free()
-    this%method = p%reconstruction%method
-    this%active_tol = p%reconstruction%active_tol
-    if (p%solver%coarse == 'cholesky') call check_orthonormal_size(product(p%mesh%nsub), comm)
-    call this%op%setup(p, comm)
+    this%method = reconstruction%method
+    this%active_tol = reconstruction%active_tol
+    if (feti%coarse%coarse == 'orthonormal') call check_orthonormal_size(product(feti%mesh%nsub), comm)
+    call this%op%setup(feti, comm)
     call MPI_Comm_size(comm, nranks, ierr)
     n = this%op%sizes()
     call log_section('Problem')
@@ -90,20 +98,20 @@ contains
       ', Dirichlet ', n%dirichlet_rows, ', contact ', n%contact_rows, '), coarse dimension ', n%coarse_dim
     call log_message(line)
     call timer_start('dual setup')
-    if (p%solver%coarse == 'cholesky') then
+    if (feti%coarse%coarse == 'orthonormal') then
       this%dual => this%orth
     else
       this%dual => this%hat
     end if
-    call this%dual%init(this%op, p%solver%rho_scale, p%solver%stopping)
+    call this%dual%init(this%op, dual%rho_scale, dual%stopping)
     call timer_stop('dual setup')
-    if (p%solver%preconditioner /= 'none') then
-      kind = p%solver%preconditioner
+    if (preconditioner%preconditioner /= 'none') then
+      kind = preconditioner%preconditioner
       ! 'auto' with hybrid TFETI (&mesh cluster): no Dirichlet preconditioner
       ! for clusters, so 'auto' is 'lumped' there
       if (kind == 'auto' .and. this%op%hybrid_units()) kind = 'lumped'
       call timer_start('preconditioner setup')
-      call this%dual%set_preconditioner(kind, subdomain_weights(p, this%op), p%solver%preconditioner_switch)
+      call this%dual%set_preconditioner(kind, subdomain_weights(feti, this%op), preconditioner%preconditioner_switch)
       call timer_stop('preconditioner setup')
       if (kind == 'auto' .and. this%dual%switch_at == 0) then
         ! one statement of what is used: the dense local solver's factors give S_s at no set-up cost
@@ -112,9 +120,9 @@ contains
                          'lumped one does)')
       else if (kind == 'auto') then
         write (line, '(a,es10.3)') "preconditioner (MPRGP in the face): 'auto' -> lumped, then dirichlet "// &
-          'once the face condition estimate exceeds ', p%solver%preconditioner_switch
+          'once the face condition estimate exceeds ', preconditioner%preconditioner_switch
         call log_message(trim(line))
-      else if (kind /= p%solver%preconditioner) then
+      else if (kind /= preconditioner%preconditioner) then
         call log_message("preconditioner (MPRGP in the face): lumped ('auto' with hybrid TFETI, "// &
                          'which has no Dirichlet preconditioner)')
       else
@@ -127,8 +135,8 @@ contains
 
   !> w_s = E_s/young of the local subdomains with &solver scaling = 'young'
   !> (the weights of the rows of B, constraints), else 1.
-  function subdomain_weights(p, op) result(w)
-    type(params_t), intent(in) :: p
+  function subdomain_weights(feti, op) result(w)
+    type(feti_settings_t), intent(in) :: feti
     type(feti_t), intent(inout), target :: op
     real(dp), allocatable :: w(:)
     type(subdomain_t), pointer :: subs(:)
@@ -136,9 +144,9 @@ contains
     subs => op%subdomains()
     allocate (w(size(subs)))
     w = 1
-    if (p%solver%scaling == 'young') then
+    if (feti%scaling%scaling == 'young') then
       do ls = 1, size(subs)
-        w(ls) = subs(ls)%young/p%material%young
+        w(ls) = subs(ls)%young/feti%material%young
       end do
     end if
   end function subdomain_weights
@@ -271,7 +279,7 @@ contains
     a_new = 0
     a_std = 0
     if (this%method /= 'standard') call this%dual%alpha_bar(g, mu_scaled, a_new)   ! Eq. 24 or 25
-    if (this%method /= 'new') then
+    if (this%method /= 'multiplier') then
       call alpha_standard(this%op, sol%lambda, g, this%active_tol, a_std, sol%standard_cost)
       write (line, '(a,3(es10.3,a))') 'standard formula: assembly ', sol%standard_cost%assembly, &
         ' s, factorization ', sol%standard_cost%factorization, ' s, solve ', sol%standard_cost%solve, ' s'

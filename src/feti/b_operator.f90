@@ -9,7 +9,7 @@
 !> Coarse vectors: the 6-blocks of the local subdomains.
 module b_operator
   use kinds, only: dp, ip, i8, MPI_REAL_DP
-  use params, only: params_t
+  use feti_settings, only: feti_settings_t
   use decomposition, only: decomposition_t
   use subdomain, only: subdomain_t
   use constraints, only: constraints_t, build_constraints, row_contact, row_gluing
@@ -65,16 +65,16 @@ contains
 
   !> Build B, c and G^T = B R of the local subdomains `subs` (which hold
   !> their geometry and R). Collective over `comm`.
-  subroutine init(this, p, dec, subs, comm, sub_dec)
+  subroutine init(this, settings, dec, subs, comm, sub_dec)
     class(b_operator_t), intent(inout) :: this
-    type(params_t), intent(in) :: p
+    type(feti_settings_t), intent(in) :: settings
     type(decomposition_t), intent(in) :: dec
     type(decomposition_t), intent(in), optional :: sub_dec   !< hybrid TFETI: the subdomains (constraints)
     type(subdomain_t), intent(in) :: subs(:)
     type(MPI_Comm), intent(in) :: comm
     integer(ip) :: ls
     call this%free()
-    call build_constraints(p, dec, subs, comm, this%con, sub_dec)
+    call build_constraints(settings, dec, subs, comm, this%con, sub_dec)
     this%nlocal = size(subs, kind=ip)
     allocate (this%offset(this%nlocal + 1))
     this%offset(1) = 0

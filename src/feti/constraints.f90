@@ -56,7 +56,7 @@
 module constraints
   use kinds, only: dp, ip, i8, MPI_INT_IP
   use errors, only: fatal_error
-  use params, only: params_t
+  use feti_settings, only: feti_settings_t
   use decomposition, only: decomposition_t
   use subdomain, only: subdomain_t
   use sorting, only: sort_permutation, sort_unique
@@ -132,21 +132,17 @@ contains
 
   !> Build B, c, the entries of G^T = B R and the exchange pattern for the
   !> local subdomains `subs` (geometry and R^s are needed). Collective over `comm`.
-  subroutine build_constraints(p, dec, subs, comm, con, sub_dec)
-    type(params_t), intent(in) :: p
+  subroutine build_constraints(settings, dec, subs, comm, con, sub_dec)
+    type(feti_settings_t), intent(in) :: settings
     type(decomposition_t), intent(in) :: dec
     type(decomposition_t), intent(in), optional :: sub_dec   !< hybrid TFETI: the subdomains
     type(subdomain_t), intent(in) :: subs(:)
     type(MPI_Comm), intent(in) :: comm
     type(constraints_t), intent(out) :: con
     type(record_t), allocatable :: rec(:)
-    integer(ip) :: nrec, i, j, r, nrows, ls, me
-    integer(ip), allocatable :: perm(:), row_of_rec(:), ghost_perm(:), ghost_owner(:), local_index(:)
-    integer(i8), allocatable :: keys(:)
-    integer(i8) :: last
+    integer(ip) :: nrec, me
+    integer(ip), allocatable :: row_of_rec(:), local_index(:), urow_first(:), ghost_owner(:)
     integer :: ierr, rank
-    integer(ip), allocatable :: urow_first(:)   ! first record (in sorted order) of each unique row
-    integer(ip) :: n_ghost, counts(4), totals(4)
     logical :: filling
     integer(ip) :: cslot   ! visit -> emit: the unit's position in the node's unit list
 
@@ -160,118 +156,14 @@ contains
     allocate (rec(nrec))
     nrec = 0
     call visit(.true.)
-
-    ! 2. Unique rows in key order.
-    allocate (keys(nrec))
-    keys = rec(:)%key
-    call sort_permutation(keys, perm)
-    allocate (row_of_rec(nrec), urow_first(nrec))
-    nrows = 0
-    last = -1
-    do i = 1, nrec
-      r = perm(i)
-      if (rec(r)%key /= last) then
-        nrows = nrows + 1
-        urow_first(nrows) = r
-        last = rec(r)%key
-      end if
-      row_of_rec(r) = nrows
-    end do
-
-    ! 3. Owned rows first (key order), then ghosts by (owner, key).
-    allocate (local_index(nrows))
-    con%n_own = count(rec(urow_first(1:nrows))%owner == me)
-    n_ghost = nrows - con%n_own
-    allocate (ghost_owner(n_ghost))
-    j = 0
-    i = 0
-    do r = 1, nrows
-      if (rec(urow_first(r))%owner == me) then
-        j = j + 1
-        local_index(r) = j
-      else
-        i = i + 1
-        ghost_owner(i) = rec(urow_first(r))%owner
-      end if
-    end do
-    call sort_permutation(ghost_owner, ghost_perm)    ! stable: key order kept within an owner
-    block
-      integer(ip), allocatable :: ghost_rows(:)
-      allocate (ghost_rows(n_ghost))
-      i = 0
-      do r = 1, nrows
-        if (rec(urow_first(r))%owner /= me) then
-          i = i + 1
-          ghost_rows(i) = r
-        end if
-      end do
-      do i = 1, n_ghost
-        local_index(ghost_rows(ghost_perm(i))) = con%n_own + i
-      end do
-    end block
-    con%n_ghost = n_ghost
-    con%n_local = con%n_own + n_ghost
-
-    allocate (con%key(con%n_local), con%kind(con%n_own), con%c(con%n_own), con%node(con%n_own), &
-              con%row_sub(con%n_own), con%row_node(con%n_own), con%scale(con%n_own), con%unit(con%n_own))
-    do r = 1, nrows
-      associate (first => rec(urow_first(r)))
-        con%key(local_index(r)) = first%key
-        if (local_index(r) <= con%n_own) then
-          con%kind(local_index(r)) = first%kind
-          con%c(local_index(r)) = first%c
-          con%scale(local_index(r)) = first%scale
-          con%unit(local_index(r)) = first%unit
-          con%node(local_index(r)) = first%gid
-        end if
-      end associate
-    end do
-    ! the owner's copy of each owned row (s_1, or the Dirichlet copy): for contact output
-    do i = 1, nrec
-      j = local_index(row_of_rec(i))
-      if (j > con%n_own) cycle
-      if (rec(i)%kind == row_dirichlet .or. rec(i)%slot == 1) then
-        con%row_sub(j) = rec(i)%sub
-        con%row_node(j) = rec(i)%node
-      end if
-    end do
-
-    ! 4. B^s entries per local subdomain.
-    allocate (con%b(size(subs)))
-    do i = 1, nrec
-      con%b(rec(i)%sub)%nentries = con%b(rec(i)%sub)%nentries + 1
-    end do
-    do ls = 1, size(subs, kind=ip)
-      allocate (con%b(ls)%row(con%b(ls)%nentries), con%b(ls)%dof(con%b(ls)%nentries), &
-                con%b(ls)%val(con%b(ls)%nentries), con%b(ls)%g(6, con%b(ls)%nentries), &
-                con%b(ls)%slot(con%b(ls)%nentries))
-      con%b(ls)%nentries = 0
-    end do
-    do i = 1, nrec
-      associate (bs => con%b(rec(i)%sub))
-        bs%nentries = bs%nentries + 1
-        bs%row(bs%nentries) = local_index(row_of_rec(i))
-        bs%dof(bs%nentries) = rec(i)%dof
-        bs%val(bs%nentries) = rec(i)%val
-        bs%slot(bs%nentries) = rec(i)%cslot
-        bs%g(:, bs%nentries) = rec(i)%val*subs(rec(i)%sub)%R(rec(i)%dof, :)   ! G^T = B R
-      end associate
-    end do
-
-    ! 5. Sizes.
-    call MPI_Exscan(con%n_own, con%offset, 1, MPI_INT_IP, MPI_SUM, comm, ierr)
-    if (rank == 0) con%offset = 0
-    con%n_contact = count(con%kind == row_contact)
-    counts = [con%n_own, con%n_contact, count(con%kind == row_dirichlet, kind=ip), &
-              count(con%kind == row_gluing, kind=ip)]
-    call MPI_Allreduce(counts, totals, 4, MPI_INT_IP, MPI_SUM, comm, ierr)
-    con%n_global = totals(1)
-    con%n_contact_global = totals(2)
-    con%n_dirichlet_global = totals(3)
-    con%n_gluing_global = totals(4)
-
-    ! 6. Exchange pattern.
-    call build_exchange(dec, con, ghost_owner(ghost_perm), me, sub_dec)
+    ! 2. Unique rows, owned ones first (key order), then ghosts by (owner, key).
+    call order_rows(rec, me, con, row_of_rec, urow_first, local_index, ghost_owner)
+    ! 3. The rows' data and the B^s entries per local subdomain.
+    call fill_rows(rec, urow_first, row_of_rec, local_index, subs, con)
+    ! 4. Sizes.
+    call count_rows(comm, rank, con)
+    ! 5. Exchange pattern.
+    call build_exchange(dec, con, ghost_owner, me, sub_dec)
 
   contains
 
@@ -291,7 +183,7 @@ contains
           gid = subs(ls)%node_gid(a)
           ijk = dec%mesh%node_ijk(gid)
           x = subs(ls)%coords(:, a)
-          call node_conditions(p, dec, ijk, x, dirichlet, value, contact, gap)
+          call node_conditions(settings, dec, ijk, x, dirichlet, value, contact, gap)
           if (present(sub_dec)) then
             call node_copies(sub_dec, dec, gid, reps, copies, merged, member, m)
             if (m == 1 .and. .not. (any(dirichlet) .or. contact)) cycle
@@ -359,10 +251,10 @@ contains
       integer(ip) :: c
       real(dp) :: young, nu
       w = 1
-      if (p%solver%scaling /= 'young') return
+      if (settings%scaling%scaling /= 'young') return
       do c = 1, size(ids, kind=ip)
-        call subdomain_material(p%material, dec, ids(c), young, nu)
-        w(c) = young/p%material%young
+        call subdomain_material(settings%material, dec, ids(c), young, nu)
+        w(c) = young/settings%material%young
       end do
     end subroutine copy_weights
 
@@ -376,9 +268,141 @@ contains
     end subroutine emit
   end subroutine build_constraints
 
+  !> The unique rows of the records `rec` in key order: `row_of_rec` the
+  !> row of each record, `urow_first` the first record of each row (sorted
+  !> order); `local_index` each row's place, owned rows first (key order),
+  !> then the ghosts by (owner, key) with their owners in `ghost_owner`.
+  !> Sets con%n_own, n_ghost, n_local.
+  subroutine order_rows(rec, me, con, row_of_rec, urow_first, local_index, ghost_owner)
+    type(record_t), intent(in) :: rec(:)
+    integer(ip), intent(in) :: me
+    type(constraints_t), intent(inout) :: con
+    integer(ip), allocatable, intent(out) :: row_of_rec(:), urow_first(:), local_index(:), ghost_owner(:)
+    integer(ip), allocatable :: perm(:), ghost_perm(:), ghost_rows(:), owners(:)
+    integer(i8), allocatable :: keys(:)
+    integer(i8) :: last
+    integer(ip) :: nrec, nrows, n_ghost, i, j, r
+
+    nrec = size(rec, kind=ip)
+    allocate (keys(nrec))
+    keys = rec(:)%key
+    call sort_permutation(keys, perm)
+    allocate (row_of_rec(nrec), urow_first(nrec))
+    nrows = 0
+    last = -1
+    do i = 1, nrec
+      r = perm(i)
+      if (rec(r)%key /= last) then
+        nrows = nrows + 1
+        urow_first(nrows) = r
+        last = rec(r)%key
+      end if
+      row_of_rec(r) = nrows
+    end do
+    allocate (local_index(nrows))
+    con%n_own = count(rec(urow_first(1:nrows))%owner == me)
+    n_ghost = nrows - con%n_own
+    allocate (owners(n_ghost), ghost_rows(n_ghost))
+    j = 0
+    i = 0
+    do r = 1, nrows
+      if (rec(urow_first(r))%owner == me) then
+        j = j + 1
+        local_index(r) = j
+      else
+        i = i + 1
+        owners(i) = rec(urow_first(r))%owner
+        ghost_rows(i) = r
+      end if
+    end do
+    call sort_permutation(owners, ghost_perm)    ! stable: key order kept within an owner
+    do i = 1, n_ghost
+      local_index(ghost_rows(ghost_perm(i))) = con%n_own + i
+    end do
+    ghost_owner = owners(ghost_perm)
+    con%n_ghost = n_ghost
+    con%n_local = con%n_own + n_ghost
+  end subroutine order_rows
+
+  !> The rows' keys, kinds, right-hand sides, scales and nodes, the owner's
+  !> copy of each owned row, and the B^s entries (with G^T = B R) of the
+  !> local subdomains `subs`, from the records (order_rows's maps).
+  subroutine fill_rows(rec, urow_first, row_of_rec, local_index, subs, con)
+    type(record_t), intent(in) :: rec(:)
+    integer(ip), intent(in) :: urow_first(:), row_of_rec(:), local_index(:)
+    type(subdomain_t), intent(in) :: subs(:)
+    type(constraints_t), intent(inout) :: con
+    integer(ip) :: i, j, r, ls
+
+    allocate (con%key(con%n_local), con%kind(con%n_own), con%c(con%n_own), con%node(con%n_own), &
+              con%row_sub(con%n_own), con%row_node(con%n_own), con%scale(con%n_own), con%unit(con%n_own))
+    do r = 1, size(local_index, kind=ip)
+      associate (first => rec(urow_first(r)))
+        con%key(local_index(r)) = first%key
+        if (local_index(r) <= con%n_own) then
+          con%kind(local_index(r)) = first%kind
+          con%c(local_index(r)) = first%c
+          con%scale(local_index(r)) = first%scale
+          con%unit(local_index(r)) = first%unit
+          con%node(local_index(r)) = first%gid
+        end if
+      end associate
+    end do
+    ! the owner's copy of each owned row (s_1, or the Dirichlet copy): for contact output
+    do i = 1, size(rec, kind=ip)
+      j = local_index(row_of_rec(i))
+      if (j > con%n_own) cycle
+      if (rec(i)%kind == row_dirichlet .or. rec(i)%slot == 1) then
+        con%row_sub(j) = rec(i)%sub
+        con%row_node(j) = rec(i)%node
+      end if
+    end do
+    ! B^s entries per local subdomain
+    allocate (con%b(size(subs)))
+    do i = 1, size(rec, kind=ip)
+      con%b(rec(i)%sub)%nentries = con%b(rec(i)%sub)%nentries + 1
+    end do
+    do ls = 1, size(subs, kind=ip)
+      allocate (con%b(ls)%row(con%b(ls)%nentries), con%b(ls)%dof(con%b(ls)%nentries), &
+                con%b(ls)%val(con%b(ls)%nentries), con%b(ls)%g(6, con%b(ls)%nentries), &
+                con%b(ls)%slot(con%b(ls)%nentries))
+      con%b(ls)%nentries = 0
+    end do
+    do i = 1, size(rec, kind=ip)
+      associate (bs => con%b(rec(i)%sub))
+        bs%nentries = bs%nentries + 1
+        bs%row(bs%nentries) = local_index(row_of_rec(i))
+        bs%dof(bs%nentries) = rec(i)%dof
+        bs%val(bs%nentries) = rec(i)%val
+        bs%slot(bs%nentries) = rec(i)%cslot
+        bs%g(:, bs%nentries) = rec(i)%val*subs(rec(i)%sub)%R(rec(i)%dof, :)   ! G^T = B R
+      end associate
+    end do
+  end subroutine fill_rows
+
+  !> The global offset of this rank's owned rows and the global row counts
+  !> (all, contact, Dirichlet, gluing). Collective over `comm`.
+  subroutine count_rows(comm, rank, con)
+    type(MPI_Comm), intent(in) :: comm
+    integer, intent(in) :: rank
+    type(constraints_t), intent(inout) :: con
+    integer(ip) :: counts(4), totals(4)
+    integer :: ierr
+    call MPI_Exscan(con%n_own, con%offset, 1, MPI_INT_IP, MPI_SUM, comm, ierr)
+    if (rank == 0) con%offset = 0
+    con%n_contact = count(con%kind == row_contact)
+    counts = [con%n_own, con%n_contact, count(con%kind == row_dirichlet, kind=ip), &
+              count(con%kind == row_gluing, kind=ip)]
+    call MPI_Allreduce(counts, totals, 4, MPI_INT_IP, MPI_SUM, comm, ierr)
+    con%n_global = totals(1)
+    con%n_contact_global = totals(2)
+    con%n_dirichlet_global = totals(3)
+    con%n_gluing_global = totals(4)
+  end subroutine count_rows
+
   !> Dirichlet components with values, and the contact condition, of a node.
-  subroutine node_conditions(p, dec, ijk, x, dirichlet, value, contact, gap)
-    type(params_t), intent(in) :: p
+  subroutine node_conditions(settings, dec, ijk, x, dirichlet, value, contact, gap)
+    type(feti_settings_t), intent(in) :: settings
     type(decomposition_t), intent(in) :: dec
     integer(ip), intent(in) :: ijk(3)
     real(dp), intent(in) :: x(3)
@@ -388,26 +412,26 @@ contains
 
     dirichlet = .false.
     value = 0
-    if (p%boundary%symmetry_x0 .and. ijk(1) == 0) dirichlet(1) = .true.
-    if (p%boundary%symmetry_y0 .and. ijk(2) == 0) dirichlet(2) = .true.
-    if (p%boundary%top_dirichlet .and. ijk(3) == dec%mesh%ng(3)) then
+    if (settings%boundary%symmetry_x0 .and. ijk(1) == 0) dirichlet(1) = .true.
+    if (settings%boundary%symmetry_y0 .and. ijk(2) == 0) dirichlet(2) = .true.
+    if (settings%boundary%top_dirichlet .and. ijk(3) == dec%mesh%ng(3)) then
       dirichlet = .true.
-      value = p%boundary%top_displacement
+      value = settings%boundary%top_displacement
     end if
     contact = .false.
     gap = 0
     if (ijk(3) /= 0 .or. dirichlet(3)) return
     lx = dec%mesh%lengths(1)
     ly = dec%mesh%lengths(2)
-    select case (p%obstacle%shape)
+    select case (settings%obstacle%shape)
     case ('plane')
       contact = .true.
-      psi = -p%obstacle%gap
+      psi = -settings%obstacle%gap
     case ('sphere')
       r2 = (x(1) - lx/2)**2 + (x(2) - ly/2)**2
-      if (r2 > p%obstacle%radius**2) return
+      if (r2 > settings%obstacle%radius**2) return
       contact = .true.
-      psi = -p%obstacle%radius - p%obstacle%gap + sqrt(p%obstacle%radius**2 - r2)
+      psi = -settings%obstacle%radius - settings%obstacle%gap + sqrt(settings%obstacle%radius**2 - r2)
     case default
       return
     end select

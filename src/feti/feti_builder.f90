@@ -27,9 +27,9 @@ submodule(feti_operators) feti_builder
 
 contains
 
-  module subroutine setup(this, p, comm)
+  module subroutine setup(this, settings, comm)
     class(feti_t), intent(inout) :: this
-    type(params_t), intent(in) :: p
+    type(feti_settings_t), intent(in) :: settings
     type(MPI_Comm), intent(in) :: comm
     integer(ip) :: ls, r(2)
     integer :: ierr
@@ -40,37 +40,13 @@ contains
     call check_coarse_ranks()
 
     call timer_start('mesh')
-    this%hybrid = is_hybrid(p%mesh)
-    if (this%hybrid) then
-      ! hybrid TFETI: the units are the clusters (src/mesh/clusters.f90)
-      call build_decomposition(p%mesh, comm, this%sub_dec)
-      call build_decomposition(unit_mesh(p%mesh), comm, this%dec)
-    else
-      call build_decomposition(p%mesh, comm, this%dec)
-    end if
-    this%n_local_subs = size(this%dec%local_subdomains, kind=ip)
-    allocate (this%subs(this%n_local_subs))
-    do ls = 1, this%n_local_subs
-      if (this%hybrid) then
-        call build_cluster(this%sub_dec, this%dec, this%dec%local_subdomains(ls), this%subs(ls))
-      else
-        call build_subdomain(this%dec, this%dec%local_subdomains(ls), this%subs(ls))
-      end if
-    end do
-    if (this%hybrid) then
-      block
-        character(len=200) :: line
-        write (line, '(a,i0,a,i0,a,3(1x,i0),a)') 'hybrid TFETI: ', this%sub_dec%nsubdomains, ' subdomains in ', &
-          this%dec%nsubdomains, ' clusters of', p%mesh%cluster, ' (corners assembled inside a cluster)'
-        call log_message(line)
-      end block
-    end if
+    call build_units(this, settings, comm)
     call timer_stop('mesh')
     call memory_mark('mesh')
 
     call timer_start('assembly')
     do ls = 1, this%n_local_subs
-      call assemble_subdomain(p%material, p%load, this%dec, this%subs(ls))
+      call assemble_subdomain(settings%material, settings%load, this%dec, this%subs(ls))
     end do
     call timer_stop('assembly')
     call memory_mark('assembly')
@@ -84,15 +60,15 @@ contains
       largest = 0
       if (this%n_local_subs > 0) largest = maxval(this%subs(:)%ndof)
       call MPI_Allreduce(MPI_IN_PLACE, largest, 1, MPI_INT_I8, MPI_MAX, comm, ierr)
-      this%ordering_used = local_ordering_for(p%solver%local_ordering, largest)
-      this%solver_used = local_solver_for(p%solver%local_solver, largest, this%hybrid)
-      write (line, '(5a,i0,a)') 'local ordering (', trim(p%solver%local_ordering), '): ', &
+      this%ordering_used = local_ordering_for(settings%local%local_ordering, largest)
+      this%solver_used = local_solver_for(settings%local%local_solver, largest, this%hybrid)
+      write (line, '(5a,i0,a)') 'local ordering (', trim(settings%local%local_ordering), '): ', &
         trim(this%ordering_used), ' (largest subdomain ', largest, ' dofs)'
       call log_message(trim(line))
     end block
     ! hybrid TFETI keeps the per-unit K^+ (sharing between clusters is not measured yet)
-    call this%f%init(this%subs, this%solver_used, p%solver%regularization, this%ordering_used, &
-                     int(mydofs, ip), share=merge('none', p%solver%share_subdomains(1:4), this%hybrid))
+    call this%f%init(this%subs, this%solver_used, settings%local%regularization, this%ordering_used, &
+                     int(mydofs, ip), share=merge('none', settings%local%share_subdomains(1:4), this%hybrid))
     block
       character(len=160) :: line
       write (line, '(a,i0,a,i0,a)') 'local subdomains: ', this%n_local_subs, ' in ', this%f%n_classes(), &
@@ -111,9 +87,9 @@ contains
 
     call timer_start('B and G')
     if (this%hybrid) then
-      call this%b%init(p, this%dec, this%subs, comm, this%sub_dec)
+      call this%b%init(settings, this%dec, this%subs, comm, this%sub_dec)
     else
-      call this%b%init(p, this%dec, this%subs, comm)
+      call this%b%init(settings, this%dec, this%subs, comm)
     end if
     call MPI_Allreduce(mydofs, this%n_primal_dofs, 1, MPI_INT_I8, MPI_SUM, comm, ierr)
     allocate (this%xall(this%b%n_concat()))
@@ -123,34 +99,96 @@ contains
     ! the dense split K^+ needs the dofs B touches: factorized now
     if (this%f%is_dense()) then
       call timer_start('factorization')
-      call this%f%build_dense(this%b, this%subs, p%solver%regularization)
+      call this%f%build_dense(this%b, this%subs, settings%local%regularization)
       call timer_stop('factorization')
     end if
     block
       character(len=200) :: line
       if (this%f%is_shared()) then
-        write (line, '(3a)') 'local solver (', trim(p%solver%local_solver), '): K^+ shared per class'
+        write (line, '(3a)') 'local solver (', trim(settings%local%local_solver), '): K^+ shared per class'
       else if (this%f%is_dense()) then
-        write (line, '(3a)') 'local solver (', trim(p%solver%local_solver), &
+        write (line, '(3a)') 'local solver (', trim(settings%local%local_solver), &
           '): dense, split along the dofs B touches (F through the Schur complements'' Cholesky factors)'
       else
-        write (line, '(4a)') 'local solver (', trim(p%solver%local_solver), '): ', trim(this%solver_used)
+        write (line, '(4a)') 'local solver (', trim(settings%local%local_solver), '): ', trim(this%solver_used)
       end if
       call log_message(trim(line))
     end block
 
     call timer_start('explicit F')
-    call choose_f_action(this, p)
+    call choose_f_action(this, settings)
     call timer_stop('explicit F')
     call memory_mark('explicit F')
 
     call timer_start('coarse setup')
     call dirichlet_rigid_test(this)
-    call this%proj%init(this%dec, this%b, comm, p%solver, this%dirichlet_holds)
+    call this%proj%init(this%dec, this%b, comm, settings%coarse, this%dirichlet_holds)
     call timer_stop('coarse setup')
     call memory_mark('coarse setup')
 
     call timer_start('dual setup')
+    call dual_data(this, comm)
+    call estimate_norm_pfp(this, settings%f_action%lanczos_steps, lanczos_setup_steps)
+    call timer_stop('dual setup')
+    call memory_mark('dual setup')
+
+  contains
+
+    !> &solver coarse_ranks against the number of ranks, before any set-up
+    !> work (the projector applies the same rule). Collective.
+    subroutine check_coarse_ranks()
+      integer :: nranks, c
+      character(len=300) :: msg
+      call MPI_Comm_size(comm, nranks, ierr)
+      ! units = clusters; an unresolved automatic cluster 0,0,0 (settings made in code) is plain TFETI
+      call choose_coarse_ranks(settings%coarse%coarse_ranks, settings%coarse%coarse_placement, nranks, &
+                               int(product(int(settings%mesh%nsub/max(settings%mesh%cluster, 1_ip), i8)), ip), c, msg)
+      if (len_trim(msg) > 0) call collective_error(msg, comm, exit_input_error)
+    end subroutine check_coarse_ranks
+  end subroutine setup
+
+  !> The decomposition and the local units (subdomains, or clusters of them
+  !> with hybrid TFETI, `&mesh cluster`) with their geometry.
+  subroutine build_units(this, settings, comm)
+    class(feti_t), intent(inout) :: this
+    type(feti_settings_t), intent(in) :: settings
+    type(MPI_Comm), intent(in) :: comm
+    integer(ip) :: ls
+    this%hybrid = is_hybrid(settings%mesh)
+    if (this%hybrid) then
+      ! hybrid TFETI: the units are the clusters (src/mesh/clusters.f90)
+      call build_decomposition(settings%mesh, comm, this%sub_dec)
+      call build_decomposition(unit_mesh(settings%mesh), comm, this%dec)
+    else
+      call build_decomposition(settings%mesh, comm, this%dec)
+    end if
+    this%n_local_subs = size(this%dec%local_subdomains, kind=ip)
+    allocate (this%subs(this%n_local_subs))
+    do ls = 1, this%n_local_subs
+      if (this%hybrid) then
+        call build_cluster(this%sub_dec, this%dec, this%dec%local_subdomains(ls), this%subs(ls))
+      else
+        call build_subdomain(this%dec, this%dec%local_subdomains(ls), this%subs(ls))
+      end if
+    end do
+    if (this%hybrid) then
+      block
+        character(len=200) :: line
+        write (line, '(a,i0,a,i0,a,3(1x,i0),a)') 'hybrid TFETI: ', this%sub_dec%nsubdomains, ' subdomains in ', &
+          this%dec%nsubdomains, ' clusters of', settings%mesh%cluster, ' (corners assembled inside a cluster)'
+        call log_message(line)
+      end block
+    end if
+  end subroutine build_units
+
+  !> The dual data: d = B K^+ f - c, e = R^T f, lambda~ = G^T (G G^T)^{-1} e
+  !> (with a check of the coarse solve's accuracy, logged), the contact rows
+  !> and their lower bounds -lambda~. Collective over `comm`.
+  subroutine dual_data(this, comm)
+    class(feti_t), intent(inout) :: this
+    type(MPI_Comm), intent(in) :: comm
+    integer(ip) :: ls, r(2)
+    integer :: ierr
     associate (n => this%b%n_own())
       allocate (this%d(n), this%lambda_tilde(n), this%lower(n), this%contact(n), this%e(6*this%n_local_subs))
       ! d = B K^+ f - c, e = R^T f
@@ -187,24 +225,7 @@ contains
       this%lower = -huge(1.0_dp)
       where (this%contact) this%lower = -this%lambda_tilde
     end associate
-    call estimate_norm_pfp(this, p%solver%power_iterations, lanczos_setup_steps)
-    call timer_stop('dual setup')
-    call memory_mark('dual setup')
-
-  contains
-
-    !> &solver coarse_ranks against the number of ranks, before any set-up
-    !> work (the projector applies the same rule). Collective.
-    subroutine check_coarse_ranks()
-      integer :: nranks, c
-      character(len=300) :: msg
-      call MPI_Comm_size(comm, nranks, ierr)
-      ! units = clusters; an unresolved automatic cluster 0,0,0 (params made in code) is plain TFETI
-      call choose_coarse_ranks(p%solver%coarse_ranks, p%solver%coarse_placement, nranks, &
-                               int(product(int(p%mesh%nsub/max(p%mesh%cluster, 1_ip), i8)), ip), c, msg)
-      if (len_trim(msg) > 0) call collective_error(msg, comm, exit_input_error)
-    end subroutine check_coarse_ranks
-  end subroutine setup
+  end subroutine dual_data
 
   !> `&solver f_action`: build the explicit local operators for 'explicit',
   !> or for 'auto' when the cost model says they pay (the same choice on all
@@ -222,9 +243,9 @@ contains
   !> build; one that goes on pays it once the implicit actions have cost
   !> about as much, so it spends at most about twice what the better of the
   !> two up-front choices would have (feti_t%apply_f makes the switch).
-  subroutine choose_f_action(this, p)
+  subroutine choose_f_action(this, settings)
     class(feti_t), intent(inout) :: this
-    type(params_t), intent(in) :: p
+    type(feti_settings_t), intent(in) :: settings
     !> F actions before the deferred explicit build per unit of the ratio
     !> build flops / bytes saved per action (the break-even count is about the ratio)
     real(dp), parameter :: deferred_actions_per_ratio = 1
@@ -235,13 +256,13 @@ contains
     logical :: use_explicit
     real(dp) :: ratio, fl(3)
     character(len=240) :: line
-    if (this%hybrid .and. p%solver%f_action == 'auto') then
+    if (this%hybrid .and. settings%f_action%f_action == 'auto') then
       call log_message('F action: implicit (K^+ solves; hybrid TFETI)')
       return
     end if
     sharing = merge(1, 0, this%f%is_shared())
     call MPI_Allreduce(MPI_IN_PLACE, sharing, 1, MPI_INTEGER, MPI_MIN, this%communicator, ierr)
-    select case (p%solver%f_action)
+    select case (settings%f_action%f_action)
     case ('explicit')
       use_explicit = .true.
     case ('implicit')
@@ -260,7 +281,7 @@ contains
       call log_message(line)
      else
       nd = this%f%touched_dofs(this%b)
-      mine = [this%f%implicit_bytes(this%b), this%f%explicit_bytes(this%b, p%solver%f_storage, nd), &
+      mine = [this%f%implicit_bytes(this%b), this%f%explicit_bytes(this%b, settings%f_action%f_storage, nd), &
               sum(int(nd, i8)**3)]
       call MPI_Allreduce(mine, all, 3, MPI_INT_I8, MPI_SUM, this%communicator, ierr)
       ratio = real(all(3), dp)/max(1.0_dp, real(all(1) - all(2), dp))
@@ -273,17 +294,17 @@ contains
       use_explicit = .false.
       if (all(2) < all(1)) then
         this%f_build_at = max(1_i8, nint(min(deferred_actions_per_ratio*ratio, 1.0e15_dp), i8))
-        this%f_regularization = p%solver%regularization
-        this%f_storage = p%solver%f_storage
+        this%f_regularization = settings%local%regularization
+        this%f_storage = settings%f_action%f_storage
       end if
      end if
     end select
     if (use_explicit) then
-      call this%f%build_explicit(this%b, this%subs, p%solver%regularization, p%solver%f_storage)
+      call this%f%build_explicit(this%b, this%subs, settings%local%regularization, settings%f_action%f_storage)
       if (this%f%is_shared()) then
         call log_message('F action: explicit local operators shared per class (dgemm)')
       else
-        call log_message('F action: explicit local operators ('//trim(p%solver%f_storage)//')')
+        call log_message('F action: explicit local operators ('//trim(settings%f_action%f_storage)//')')
       end if
     else if (this%f_build_at > 0) then
       write (line, '(a,i0,a)') "F action: implicit (K^+ solves), the explicit local operators ("// &

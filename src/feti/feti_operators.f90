@@ -16,7 +16,8 @@ module feti_operators
   use kinds, only: dp, ip, i8, name_len, MPI_REAL_DP
   use logger, only: log_message
   use timers, only: timer_start, timer_stop
-  use params, only: params_t, local_ordering_for, local_solver_for
+  use feti_settings, only: feti_settings_t
+  use local_settings, only: local_ordering_for, local_solver_for
   use decomposition, only: decomposition_t
   use subdomain, only: subdomain_t
   use box_mesh, only: box_mesh_t
@@ -75,10 +76,10 @@ module feti_operators
     real(dp) :: f_regularization = 1
     character(len=name_len) :: f_storage = 'packed'   !< &solver f_storage (the same length)
     !> the ordering of the subdomain factorizations used ('amd' | 'metis'; `&solver local_ordering`,
-    !> resolved by params::local_ordering_for from the largest subdomain of the run)
+    !> resolved by local_settings::local_ordering_for from the largest subdomain of the run)
     character(len=8) :: ordering_used = ''
     !> the local solver asked of f_operator ('dense' | 'block' | 'subdomain'; `&solver local_solver`,
-    !> resolved by params::local_solver_for; classes of congruent subdomains override it)
+    !> resolved by local_settings::local_solver_for; classes of congruent subdomains override it)
     character(len=10) :: solver_used = ''
     !> a load history (set_load): f (concatenated) and c of the set-up, the
     !> load factor 1 and the obstacle where the input puts it
@@ -152,9 +153,9 @@ module feti_operators
     !> Everything before the dual solve: decomposition, subdomains, K^+, B, G,
     !> the coarse problem, d, e, lambda~ and ||P F P|| (submodule feti_builder).
     !> Collective over `comm`.
-    module subroutine setup(this, p, comm)
+    module subroutine setup(this, settings, comm)
       class(feti_t), intent(inout) :: this
-      type(params_t), intent(in) :: p
+      type(feti_settings_t), intent(in) :: settings
       type(MPI_Comm), intent(in) :: comm
     end subroutine setup
     !> Continue the Lanczos estimate of ||P F P|| that set-up began (its
@@ -331,7 +332,7 @@ contains
                                   force_low_rank)
   end function masked_coarse
 
-  !> The explicit G~ = L^{-1} G of `&solver coarse = 'cholesky'`. Collective.
+  !> The explicit G~ = L^{-1} G of `&solver coarse = 'orthonormal'`. Collective.
   subroutine init_orthonormal(this, orth)
     class(feti_t), intent(inout) :: this
     type(orthonormal_coarse_t), intent(inout) :: orth

@@ -1,5 +1,5 @@
 !> The coarse space with explicitly orthonormalized rows (paper Eq. 8 with
-!> T = L^{-1}; `&solver coarse = 'cholesky'`): G G^T assembled dense and
+!> T = L^{-1}; `&solver coarse = 'orthonormal'`): G G^T assembled dense and
 !> replicated on every rank, its Cholesky factor G G^T = L L^T (LAPACK dpotrf),
 !> and the columns of G~ = L^{-1} G that belong to this rank's owned
 !> multipliers, formed once (dtrsm). Then G~ G~^T = I and
@@ -93,7 +93,7 @@ contains
     type(MPI_Comm), intent(in) :: comm
     character(len=400) :: msg
     if (nsubdomains <= orthonormal_max_subdomains) return
-    write (msg, '(a,i0,a,i0,a,i0,a,i0,a)') "group &solver, variable coarse: 'cholesky' (G G^T dense and "// &
+    write (msg, '(a,i0,a,i0,a,i0,a,i0,a)') "group &solver, variable coarse: 'orthonormal' (G G^T dense and "// &
       'replicated, explicit G~ = L^{-1} G) is limited to ', orthonormal_max_subdomains, &
       ' subdomains (coarse dimension ', 6*orthonormal_max_subdomains, '); this case has ', nsubdomains, &
       ' subdomains (coarse dimension ', 6*nsubdomains, "): use coarse = 'mumps'"

@@ -11,7 +11,7 @@ module projector
   use coarse_problem, only: coarse_problem_t, coarse_layout_t, build_coarse_layout, coarse_options_t, &
                             choose_coarse_ranks, ranks_per_node, dense_for, gathered_counts
   use sorting, only: sort_permutation
-  use params, only: solver_params_t
+  use coarse_settings, only: coarse_settings_t
   use errors, only: collective_error, exit_input_error
   use logger, only: log_message
   use orthonormal_coarse, only: orthonormal_coarse_t
@@ -60,7 +60,7 @@ contains
     type(decomposition_t), intent(in) :: dec
     type(b_operator_t), intent(inout), target :: b
     type(MPI_Comm), intent(in) :: comm
-    type(solver_params_t), intent(in) :: s
+    type(coarse_settings_t), intent(in) :: s
     logical, intent(in) :: regular_base
     type(constraints_t), pointer :: con
     integer(ip), allocatable :: schur_positions(:)
@@ -396,7 +396,7 @@ contains
     call this%masked%make_view(this%coarse, keys, pos, g)
   end subroutine schur_view
 
-  !> The explicit G~ = L^{-1} G of `&solver coarse = 'cholesky'`. Collective.
+  !> The explicit G~ = L^{-1} G of `&solver coarse = 'orthonormal'`. Collective.
   subroutine init_orthonormal(this, dec, b, orth)
     class(projector_t), intent(in) :: this
     type(decomposition_t), intent(in) :: dec

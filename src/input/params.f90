@@ -16,83 +16,46 @@ module params
   use materials, only: material_settings_t
   use assembly, only: load_settings_t
   use history_settings, only: history_settings_t
+  use boundary_settings, only: boundary_settings_t
+  use obstacle_settings, only: obstacle_settings_t
+  use scaling_settings, only: scaling_settings_t
+  use local_settings, only: local_settings_t
+  use f_action_settings, only: f_action_settings_t
+  use coarse_settings, only: coarse_settings_t
+  use preconditioner_settings, only: preconditioner_settings_t
+  use feti_settings, only: feti_settings_t
+  use dual_settings, only: dual_settings_t
+  use reconstruction_settings, only: reconstruction_settings_t
+  use output_settings, only: output_settings_t
   implicit none
   private
 
   public :: read_params, check_params, echo_params, input_warnings, default_params, param_items, group_names
-  public :: auto_cluster, resolve_cluster, local_ordering_for, local_solver_for
-
-  !> local_ordering = 'auto': MUMPS's AMD up to this many dofs in the largest subdomain, METIS above
-  integer(i8), parameter, public :: amd_max_dofs = 1500
-  !> local_solver = 'auto': the dense split K^+ up to this many dofs in the largest subdomain
-  integer(i8), parameter, public :: dense_max_dofs = 500
+  public :: auto_cluster, resolve_cluster, feti_settings_of
 
   integer, parameter :: msg_len = 1024
   !> &obstacle gap: the deepest initial penetration accepted, as a fraction of the body's height
   real(dp), parameter, public :: max_penetration = 0.1_dp
 
-  type, public :: boundary_params_t
-    logical :: top_dirichlet = .true.         !< prescribe u on z = Lz
-    real(dp) :: top_displacement(3) = [0.0_dp, 0.0_dp, -0.005_dp]  !< its value [mm]
-    logical :: symmetry_x0 = .false.          !< u_x = 0 on x = 0
-    logical :: symmetry_y0 = .false.          !< u_y = 0 on y = 0
-  end type boundary_params_t
-
-  type, public :: obstacle_params_t
-    character(len=name_len) :: shape = 'sphere'  !< 'sphere' | 'plane' | 'none'
-    real(dp) :: radius = 1                    !< sphere radius [mm]
-    real(dp) :: gap = 0                       !< initial gap below z = 0 [mm]
-  end type obstacle_params_t
-
-  !> &solver: the QP solver's settings are owned by it (smalbe_settings_t with
-  !> its MPRGP and polish settings: defaults, checks, namelist variables); the
-  !> other variables belong to the dual problem and the FETI operators.
+  !> &solver: each variable belongs to the component that owns it (its
+  !> settings type: defaults, checks, namelist variables); solver_group hands
+  !> each assignment to its owner.
   type, public :: solver_params_t
-    type(smalbe_settings_t) :: smalbe         !< SMALBE, its inner MPRGP and the polish
-    real(dp) :: rho_scale = 1                 !< penalty rho = rho_scale ||P F P||
-    integer(ip) :: power_iterations = 50      !< cap of the ||P F P|| Lanczos steps
-    character(len=name_len) :: coarse = 'mumps'      !< 'mumps' | 'cholesky'
-    character(len=name_len) :: local_ordering = 'auto'  !< 'auto' | 'metis' | 'amd' (local_ordering_for)
-    character(len=name_len) :: local_solver = 'auto'     !< 'auto' | 'dense' | 'block' | 'subdomain' (local_solver_for)
-    !> how F is applied: 'implicit' (K^+ solves) | 'explicit' (dense local
-    !> operators, BLAS) | 'auto' (the cheaper one by the measured cost model)
-    character(len=name_len) :: f_action = 'auto'
-    character(len=name_len) :: f_storage = 'packed'      !< explicit F: 'packed' | 'symmetric' | 'general'
-    !> 'auto': one K^+ (and one explicit S^) per class of congruent subdomains
-    !> of a rank, when there are such classes | 'none': per subdomain
-    character(len=name_len) :: share_subdomains = 'auto'
-    !> 'auto' (coarse_ranks decides) | 'redundant' (= coarse_ranks 1) | 'distributed' (= all ranks)
-    character(len=name_len) :: coarse_placement = 'auto'
-    integer(ip) :: coarse_ranks = 0           !< ranks per coarse group (0: chosen from the coarse dimension)
-    real(dp) :: coarse_blr = 0                !< MUMPS BLR dropping tolerance for G G^T (0: full rank)
-    logical :: coarse_ooc = .false.           !< MUMPS out-of-core factors of G G^T
-    !> how G G^T is factorized: 'mumps' | 'dense' (LAPACK Cholesky, one-rank
-    !> coarse groups) | 'auto' ('dense' up to coarse_dense_max, else 'mumps')
-    character(len=name_len) :: coarse_factor = 'auto'
-    real(dp) :: regularization = 1            !< rho_f relative to the mean diagonal of K
-    character(len=name_len) :: scaling = 'young'  !< rows of B weighted by Young's moduli: 'young' | 'none'
-    !> SMALBE's stopping test: 'violation' (largest constraint violation in
-    !> displacement units, relative) | 'norm' (the classical 2-norm test)
-    character(len=name_len) :: stopping = 'violation'
-    !> MPRGP preconditioned in the face (and PCPG): 'none' | 'lumped' | 'dirichlet' | 'auto'
-    !> ('lumped' until the face condition estimate exceeds preconditioner_switch, then 'dirichlet')
-    character(len=name_len) :: preconditioner = 'auto'
-    real(dp) :: preconditioner_switch = 100   !< 'auto': the face condition estimate that switches
+    type(smalbe_settings_t) :: smalbe             !< SMALBE, its inner MPRGP and the polish
+    type(dual_settings_t) :: dual                 !< rho_scale, stopping
+    type(coarse_settings_t) :: coarse             !< the coarse problem
+    type(local_settings_t) :: local               !< the local solver K^+
+    type(f_action_settings_t) :: f_action         !< the F action and the ||P F P|| estimate
+    type(preconditioner_settings_t) :: preconditioner  !< the dual preconditioner
+    type(scaling_settings_t) :: scaling           !< the row scaling of B
   end type solver_params_t
 
-  type, public :: reconstruction_params_t
-    character(len=name_len) :: method = 'both'  !< 'new' | 'standard' | 'both'
-    real(dp) :: active_tol = 1.0e-8_dp        !< contact row active if lambda > active_tol max(lambda)
-    real(dp) :: kkt_tol = 1.0e-3_dp           !< largest KKT residual accepted
-  end type reconstruction_params_t
+  integer, parameter :: max_values = 3      !< the most values of one variable (arrays of 3)
 
-  type, public :: output_params_t
-    character(len=path_len) :: directory = 'output'  !< where results go
-    character(len=name_len) :: run_name = 'cube'      !< run name, file prefix
-    logical :: write_hdf5 = .true.            !< HDF5 + XDMF fields
-    logical :: write_report = .true.          !< report.json
-  end type output_params_t
-
+  !> Variables that were renamed: 'group old new'. The old spelling is
+  !> refused with a message that names the new one (never read silently).
+  character(len=*), parameter :: renamed_variables(1) = [character(len=48) :: &
+    'solver power_iterations lanczos_steps']
 
   !> One variable of a group as the namelist writes it (param_items).
   type, public :: param_item_t
@@ -108,11 +71,11 @@ module params
     type(mesh_settings_t) :: mesh
     type(material_settings_t) :: material
     type(load_settings_t) :: load
-    type(boundary_params_t) :: boundary
-    type(obstacle_params_t) :: obstacle
+    type(boundary_settings_t) :: boundary
+    type(obstacle_settings_t) :: obstacle
     type(solver_params_t) :: solver
-    type(reconstruction_params_t) :: reconstruction
-    type(output_params_t) :: output
+    type(reconstruction_settings_t) :: reconstruction
+    type(output_settings_t) :: output
     type(history_settings_t) :: history
   end type params_t
 
@@ -195,7 +158,8 @@ contains
         return
       end if
       seen(i) = .true.
-      call read_group_checked(name, group_text, p, status, msg)
+      call check_renamed(name, group_text, status, msg)
+      if (status == 0) call read_group_checked(name, group_text, p, status, msg)
       if (status == 0) call check_assignments(name, group_text, p, status, msg)
       if (status /= 0) then
         msg = 'file '//trim(file)//', group &'//name//': '//trim(msg)
@@ -433,6 +397,38 @@ contains
     end function count_values
   end subroutine check_assignments
 
+  !> Refuse the old spelling of a renamed variable (renamed_variables) in
+  !> group `name`, with a message that names the new one.
+  subroutine check_renamed(name, group_text, status, msg)
+    character(len=*), intent(in) :: name, group_text
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    character(len=48) :: group, old, new, entry
+    character(len=:), allocatable :: body, lhs
+    integer, allocatable :: starts(:)
+    integer :: k, i, r, nstarts, body_start
+    status = 0
+    msg = ''
+    body_start = index(group_text, ' ')
+    if (body_start == 0) return
+    body = group_text(body_start:len(group_text) - 1)
+    call assignment_starts(body, starts, nstarts)
+    do k = 1, nstarts
+      i = index(body(starts(k):), '=')
+      if (i == 0) cycle
+      lhs = lower(trim(adjustl(body(starts(k):starts(k) + i - 2))))
+      if (index(lhs, '(') > 0) lhs = trim(lhs(1:index(lhs, '(') - 1))
+      do r = 1, size(renamed_variables)
+        entry = renamed_variables(r)
+        read (entry, *) group, old, new
+        if (trim(group) /= name .or. trim(old) /= lhs) cycle
+        status = 1
+        msg = 'variable '//lhs//': renamed '//trim(new)//' (write '//trim(new)//' = ... instead)'
+        return
+      end do
+    end do
+  end subroutine check_renamed
+
   !> Read one group; on failure find the assignment at fault.
   subroutine read_group_checked(name, group_text, p, status, msg)
     character(len=*), intent(in) :: name, group_text
@@ -560,12 +556,11 @@ contains
     end if
   end subroutine assignment_starts
 
-  !> The one table of the variables: each group's namelist, the copy of `p`
-  !> into it and back. With `group_text`, read the group from that text into
-  !> `p`; without, write it (as the compiler writes a namelist, strings quoted)
-  !> into `written` and leave `p` as it is. Adding a variable: a component
-  !> with its default in the group's type, a line here, a check in
-  !> check_params; the echo and report.json follow (param_items).
+  !> The dispatcher of the groups: each group's owner reads it from
+  !> `group_text` into `p` or, without `group_text`, writes it (as the
+  !> compiler writes a namelist, strings quoted) into `written`. Adding a
+  !> variable: a component with its default in its owner's settings type, in
+  !> its owner's namelist and check; the echo and report.json follow.
   subroutine group_namelist(name, p, status, msg, group_text, written)
     character(len=*), intent(in) :: name
     type(params_t), intent(inout) :: p
@@ -573,26 +568,7 @@ contains
     character(len=*), intent(out) :: msg
     character(len=*), intent(in), optional :: group_text
     character(len=*), intent(out), optional :: written(:)
-    character(len=:), allocatable :: rest, tail(:)
-    integer :: k, i
     logical :: reading
-    integer(ip) :: power_iterations, coarse_ranks
-    real(dp) :: top_displacement(3), &
-                radius, gap, rho_scale, coarse_blr, regularization, active_tol, kkt_tol, preconditioner_switch
-    character(len=name_len) :: shape, coarse, &
-                               local_ordering, local_solver, coarse_placement, method, scaling, stopping, &
-                               f_action, f_storage, share_subdomains, preconditioner, coarse_factor
-    character(len=path_len) :: directory
-    logical :: top_dirichlet, symmetry_x0, symmetry_y0, write_hdf5, write_report, coarse_ooc
-    namelist /boundary/ top_dirichlet, top_displacement, symmetry_x0, symmetry_y0
-    namelist /obstacle/ shape, radius, gap
-    ! &solver: the variables that are not the QP solver's (solver_group hands those to it)
-    namelist /solver/ rho_scale, power_iterations, coarse, coarse_placement, coarse_ranks, coarse_blr, coarse_ooc, &
-      coarse_factor, local_ordering, local_solver, f_action, f_storage, share_subdomains, &
-      regularization, scaling, stopping, preconditioner, preconditioner_switch
-    namelist /reconstruction/ method, active_tol, kkt_tol
-    character(len=name_len) :: run_name
-    namelist /output/ directory, run_name, write_hdf5, write_report
 
     msg = ''
     status = 0
@@ -600,109 +576,55 @@ contains
     if (present(written)) written = ''
     select case (name)
     case ('mesh')
-      ! the group's owner reads and writes it
       if (reading) call p%mesh%read_namelist(group_text, status, msg)
       if (.not. reading) call p%mesh%write_namelist(written, status, msg)
-      return
     case ('material')
       if (reading) call p%material%read_namelist(group_text, status, msg)
       if (.not. reading) call p%material%write_namelist(written, status, msg)
-      return
     case ('load')
       if (reading) call p%load%read_namelist(group_text, status, msg)
       if (.not. reading) call p%load%write_namelist(written, status, msg)
-      return
     case ('history')
       if (reading) call p%history%read_namelist(group_text, status, msg)
       if (.not. reading) call p%history%write_namelist(written, status, msg)
-      return
     case ('boundary')
-      top_dirichlet = p%boundary%top_dirichlet; top_displacement = p%boundary%top_displacement
-      symmetry_x0 = p%boundary%symmetry_x0; symmetry_y0 = p%boundary%symmetry_y0
-      if (reading) read (group_text, nml=boundary, iostat=status, iomsg=msg)
-      if (.not. reading) write (written, nml=boundary, delim='quote', iostat=status, iomsg=msg)
+      if (reading) call p%boundary%read_namelist(group_text, status, msg)
+      if (.not. reading) call p%boundary%write_namelist(written, status, msg)
     case ('obstacle')
-      shape = p%obstacle%shape; radius = p%obstacle%radius; gap = p%obstacle%gap
-      if (reading) read (group_text, nml=obstacle, iostat=status, iomsg=msg)
-      if (.not. reading) write (written, nml=obstacle, delim='quote', iostat=status, iomsg=msg)
+      if (reading) call p%obstacle%read_namelist(group_text, status, msg)
+      if (.not. reading) call p%obstacle%write_namelist(written, status, msg)
     case ('solver')
-      associate (s => p%solver)
-        rho_scale = s%rho_scale
-        power_iterations = s%power_iterations; coarse = s%coarse
-        local_ordering = s%local_ordering; local_solver = s%local_solver
-        f_action = s%f_action; f_storage = s%f_storage; share_subdomains = s%share_subdomains
-        coarse_placement = s%coarse_placement; coarse_ranks = s%coarse_ranks
-        coarse_blr = s%coarse_blr; coarse_ooc = s%coarse_ooc; coarse_factor = s%coarse_factor
-        regularization = s%regularization; scaling = s%scaling; stopping = s%stopping
-        preconditioner = s%preconditioner; preconditioner_switch = s%preconditioner_switch
-      end associate
-      if (reading) then
-        call solver_group(p%solver%smalbe, group_text, status, msg, rest)
-        if (status /= 0) return
-        read (rest, nml=solver, iostat=status, iomsg=msg)
-      else
-        call solver_group(p%solver%smalbe, status=status, msg=msg, written=written)
-        if (status /= 0) return
-        k = count(written /= '')
-        allocate (character(len=len(written)) :: tail(size(written) - k))
-        write (tail, nml=solver, delim='quote', iostat=status, iomsg=msg)
-        do i = 1, size(tail)
-          if (tail(i)(1:1) == '&' .or. k >= size(written)) cycle
-          k = k + 1
-          written(k) = tail(i)
-        end do
-      end if
+      if (reading) call solver_group(p%solver, group_text, status, msg)
+      if (.not. reading) call solver_group(p%solver, status=status, msg=msg, written=written)
     case ('reconstruction')
-      method = p%reconstruction%method; active_tol = p%reconstruction%active_tol
-      kkt_tol = p%reconstruction%kkt_tol
-      if (reading) read (group_text, nml=reconstruction, iostat=status, iomsg=msg)
-      if (.not. reading) write (written, nml=reconstruction, delim='quote', iostat=status, iomsg=msg)
+      if (reading) call p%reconstruction%read_namelist(group_text, status, msg)
+      if (.not. reading) call p%reconstruction%write_namelist(written, status, msg)
     case ('output')
-      directory = p%output%directory; run_name = p%output%run_name
-      write_hdf5 = p%output%write_hdf5; write_report = p%output%write_report
-      if (reading) read (group_text, nml=output, iostat=status, iomsg=msg)
-      if (.not. reading) write (written, nml=output, delim='quote', iostat=status, iomsg=msg)
-    end select
-    if (.not. reading) return
-    select case (name)
-    case ('boundary')
-      p%boundary = boundary_params_t(top_dirichlet, top_displacement, symmetry_x0, symmetry_y0)
-    case ('obstacle')
-      p%obstacle = obstacle_params_t(lower(shape), radius, gap)
-    case ('solver')
-      p%solver = solver_params_t(p%solver%smalbe, rho_scale, power_iterations, lower(coarse), &
-                                 lower(local_ordering), lower(local_solver), lower(f_action), lower(f_storage), &
-                                 lower(share_subdomains), &
-                                 lower(coarse_placement), coarse_ranks, coarse_blr, coarse_ooc, lower(coarse_factor), &
-                                 regularization, lower(scaling), lower(stopping), lower(preconditioner), &
-                                 preconditioner_switch)
-    case ('reconstruction')
-      p%reconstruction = reconstruction_params_t(lower(method), active_tol, kkt_tol)
-    case ('output')
-      p%output = output_params_t(directory, run_name, write_hdf5, write_report)
+      if (reading) call p%output%read_namelist(group_text, status, msg)
+      if (.not. reading) call p%output%write_namelist(written, status, msg)
     end select
   end subroutine group_namelist
 
   !> The dispatcher of &solver: each assignment of `group_text` goes to the
-  !> component that owns the variable (SMALBE, its inner MPRGP, the polish:
-  !> each reads its own variables with its own namelist); `rest` is the group
-  !> with the other assignments (read by group_namelist). Without
-  !> `group_text`: the components write their variables into `written`
-  !> (from its first line '&SOLVER', without the closing '/').
-  subroutine solver_group(settings, group_text, status, msg, rest, written)
-    type(smalbe_settings_t), intent(inout) :: settings
+  !> component that owns the variable (SMALBE, its inner MPRGP, the polish,
+  !> the dual problem, the coarse problem, the local solver, the F action,
+  !> the preconditioner, the row scaling: each reads its own variables with
+  !> its own namelist); an assignment no component owns goes to SMALBE, whose
+  !> read refuses it. Without `group_text`: the components write their
+  !> variables into `written` (from its first line '&SOLVER', without the
+  !> closing '/').
+  subroutine solver_group(settings, group_text, status, msg, written)
+    type(solver_params_t), intent(inout) :: settings
     character(len=*), intent(in), optional :: group_text
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
-    character(len=:), allocatable, intent(out), optional :: rest
     character(len=*), intent(out), optional :: written(:)
-    integer, parameter :: n_parts = 3
+    integer, parameter :: n_parts = 9
     character(len=:), allocatable :: body, piece, name, part(:)
     character(len=path_len + 64) :: lines(64)
     type(param_item_t), allocatable :: items(:)
     integer, allocatable :: starts(:)
-    integer :: c, k, i, nstarts, body_start, line
-    logical :: owned
+    integer :: c, k, i, nstarts, body_start, line, owner
 
     status = 0
     msg = ''
@@ -724,7 +646,6 @@ contains
     end if
     allocate (character(len=len(group_text)) :: part(n_parts))
     part = ''
-    rest = ''
     body_start = index(group_text, ' ')
     if (body_start == 0) body_start = len(group_text)
     body = group_text(body_start:len(group_text) - 1)
@@ -736,7 +657,7 @@ contains
         piece = body(starts(k):)
       end if
       i = index(piece, '=')
-      owned = .false.
+      owner = 1
       if (i > 0) then
         name = lower(trim(adjustl(piece(1:i - 1))))
         do c = 1, n_parts
@@ -744,38 +665,65 @@ contains
           if (status /= 0) return
           call parse_namelist(join(lines), items)
           if (any(items%name == name)) then
-            part(c) = trim(part(c))//' '//piece
-            owned = .true.
+            owner = c
             exit
           end if
         end do
       end if
-      if (.not. owned) rest = rest//' '//piece
+      part(owner) = trim(part(owner))//' '//piece
     end do
     ! every component reads (an empty group leaves its values as they are)
     do c = 1, n_parts
-      select case (c)
-      case (1)
-        call settings%read_namelist('&solver '//trim(part(c))//' /', status, msg)
-      case (2)
-        call settings%inner%read_namelist('&solver '//trim(part(c))//' /', status, msg)
-      case (3)
-        call settings%polish%read_namelist('&solver '//trim(part(c))//' /', status, msg)
-      end select
+      call read_part(c, '&solver '//trim(part(c))//' /')
       if (status /= 0) return
     end do
-    rest = '&solver '//rest//' /'
   contains
+    subroutine read_part(c, text)
+      integer, intent(in) :: c
+      character(len=*), intent(in) :: text
+      select case (c)
+      case (1)
+        call settings%smalbe%read_namelist(text, status, msg)
+      case (2)
+        call settings%smalbe%inner%read_namelist(text, status, msg)
+      case (3)
+        call settings%smalbe%polish%read_namelist(text, status, msg)
+      case (4)
+        call settings%dual%read_namelist(text, status, msg)
+      case (5)
+        call settings%f_action%read_namelist(text, status, msg)
+      case (6)
+        call settings%coarse%read_namelist(text, status, msg)
+      case (7)
+        call settings%local%read_namelist(text, status, msg)
+      case (8)
+        call settings%scaling%read_namelist(text, status, msg)
+      case (9)
+        call settings%preconditioner%read_namelist(text, status, msg)
+      end select
+    end subroutine read_part
     subroutine write_part(c, out)
       integer, intent(in) :: c
       character(len=*), intent(out) :: out(:)
       select case (c)
       case (1)
-        call settings%write_namelist(out, status, msg)
+        call settings%smalbe%write_namelist(out, status, msg)
       case (2)
-        call settings%inner%write_namelist(out, status, msg)
+        call settings%smalbe%inner%write_namelist(out, status, msg)
       case (3)
-        call settings%polish%write_namelist(out, status, msg)
+        call settings%smalbe%polish%write_namelist(out, status, msg)
+      case (4)
+        call settings%dual%write_namelist(out, status, msg)
+      case (5)
+        call settings%f_action%write_namelist(out, status, msg)
+      case (6)
+        call settings%coarse%write_namelist(out, status, msg)
+      case (7)
+        call settings%local%write_namelist(out, status, msg)
+      case (8)
+        call settings%scaling%write_namelist(out, status, msg)
+      case (9)
+        call settings%preconditioner%write_namelist(out, status, msg)
       end select
     end subroutine write_part
     function join(out) result(text)
@@ -807,13 +755,13 @@ contains
       if (any(m%cluster > 1)) then
         if (p%material%variation /= 'none') call fail('mesh', 'cluster', &
           "> 1 (hybrid TFETI) needs &material variation = 'none'", ints(m%cluster))
-        if (p%solver%preconditioner == 'dirichlet') call fail('mesh', 'cluster', &
+        if (p%solver%preconditioner%preconditioner == 'dirichlet') call fail('mesh', 'cluster', &
           "> 1 (hybrid TFETI) works with &solver preconditioner = 'none' or 'lumped', not 'dirichlet'", &
           ints(m%cluster))
-        if (p%solver%f_action == 'explicit') call fail('mesh', 'cluster', &
+        if (p%solver%f_action%f_action == 'explicit') call fail('mesh', 'cluster', &
           "> 1 (hybrid TFETI) works with &solver f_action = 'implicit' or 'auto' (which then stays implicit)", &
           ints(m%cluster))
-        if (p%solver%local_solver == 'dense') call fail('mesh', 'cluster', &
+        if (p%solver%local%local_solver == 'dense') call fail('mesh', 'cluster', &
           "> 1 (hybrid TFETI) works with &solver local_solver = 'auto', 'block' or 'subdomain', not 'dense'", &
           ints(m%cluster))
       end if
@@ -833,58 +781,27 @@ contains
       call fail('load', 'top_pressure', 'has no effect with &boundary top_dirichlet = .true. (the prescribed '// &
                 'displacement holds the top face): set top_dirichlet = .false. or drop top_pressure', &
                 reals([p%load%top_pressure])//', top_dirichlet = T')
-    associate (o => p%obstacle)
-      if (.not. one_of(o%shape, [character(len=8) :: 'sphere', 'plane', 'none'])) &
-        call fail('obstacle', 'shape', "must be 'sphere', 'plane' or 'none'", o%shape)
-      if (o%radius <= 0) call fail('obstacle', 'radius', 'must be > 0', reals([o%radius]))
-      if (o%shape /= 'none' .and. o%gap < -max_penetration*p%mesh%lengths(3)) &
-        call fail('obstacle', 'gap', 'the obstacle must not start deeper inside the body than 0.1 times '// &
-                  'its height &mesh lengths(3)', reals([o%gap]))
-    end associate
+    call p%obstacle%check(variable, rule, got)
+    if (len(variable) > 0) call fail('obstacle', variable, rule, got)
+    if (p%obstacle%shape /= 'none' .and. p%obstacle%gap < -max_penetration*p%mesh%lengths(3)) &
+      call fail('obstacle', 'gap', 'the obstacle must not start deeper inside the body than 0.1 times '// &
+                'its height &mesh lengths(3)', reals([p%obstacle%gap]))
+    ! &solver: each component checks its own variables
     associate (s => p%solver)
       call s%smalbe%check(variable, rule, got)
       if (len(variable) > 0) call fail('solver', variable, rule, got)
-      if (s%rho_scale <= 0) call fail('solver', 'rho_scale', 'must be > 0', reals([s%rho_scale]))
-      if (s%power_iterations < 1) &
-        call fail('solver', 'power_iterations', 'must be >= 1', ints([s%power_iterations]))
-      if (.not. one_of(s%coarse, [character(len=8) :: 'mumps', 'cholesky'])) &
-        call fail('solver', 'coarse', "must be 'mumps' or 'cholesky'", s%coarse)
-      if (.not. one_of(s%local_ordering, [character(len=8) :: 'auto', 'amd', 'metis'])) &
-        call fail('solver', 'local_ordering', "must be 'auto', 'amd' or 'metis'", s%local_ordering)
-      if (.not. one_of(s%coarse_placement, [character(len=12) :: 'auto', 'redundant', 'distributed'])) &
-        call fail('solver', 'coarse_placement', "must be 'auto', 'redundant' or 'distributed'", s%coarse_placement)
-      if (s%coarse_ranks < 0) &
-        call fail('solver', 'coarse_ranks', 'must be >= 0 (0: chosen from the coarse dimension and the ranks)', &
-                  ints([s%coarse_ranks]))
-      if (s%coarse_ranks > 0 .and. s%coarse_placement /= 'auto') &
-        call fail('solver', 'coarse_ranks', "give coarse_ranks or coarse_placement ('redundant' = 1, "// &
-                  "'distributed' = all ranks), not both", ints([s%coarse_ranks])//', '//trim(s%coarse_placement))
-      if (.not. (s%coarse_blr >= 0 .and. s%coarse_blr < 1)) &
-        call fail('solver', 'coarse_blr', 'must be in [0, 1) (0: full-rank factors)', reals([s%coarse_blr]))
-      if (.not. one_of(s%coarse_factor, [character(len=6) :: 'auto', 'mumps', 'dense'])) &
-        call fail('solver', 'coarse_factor', "must be 'auto', 'mumps' or 'dense'", s%coarse_factor)
-      if (s%coarse_factor == 'dense' .and. (s%coarse_ranks > 1 .or. s%coarse_placement == 'distributed')) &
-        call fail('solver', 'coarse_factor', "'dense' factorizes G G^T on every rank: it needs coarse groups of one "// &
-                  "rank (coarse_ranks = 0 or 1, coarse_placement 'auto' or 'redundant')", s%coarse_factor)
-      if (.not. one_of(s%local_solver, [character(len=10) :: 'auto', 'dense', 'block', 'subdomain'])) &
-        call fail('solver', 'local_solver', "must be 'auto', 'dense', 'block' or 'subdomain'", s%local_solver)
-      if (.not. one_of(s%f_action, [character(len=10) :: 'implicit', 'explicit', 'auto'])) &
-        call fail('solver', 'f_action', "must be 'implicit', 'explicit' or 'auto'", s%f_action)
-      if (.not. one_of(s%f_storage, [character(len=10) :: 'symmetric', 'packed', 'general'])) &
-        call fail('solver', 'f_storage', "must be 'symmetric', 'packed' or 'general'", s%f_storage)
-      if (.not. one_of(s%share_subdomains, [character(len=10) :: 'auto', 'none'])) &
-        call fail('solver', 'share_subdomains', "must be 'auto' or 'none'", s%share_subdomains)
-      if (s%regularization <= 0) &
-        call fail('solver', 'regularization', 'must be > 0', reals([s%regularization]))
-      if (.not. one_of(s%scaling, [character(len=8) :: 'none', 'young'])) &
-        call fail('solver', 'scaling', "must be 'none' or 'young'", s%scaling)
-      if (.not. one_of(s%stopping, [character(len=9) :: 'violation', 'norm'])) &
-        call fail('solver', 'stopping', "must be 'violation' or 'norm'", s%stopping)
-      if (.not. one_of(s%preconditioner, [character(len=9) :: 'none', 'lumped', 'dirichlet', 'auto'])) &
-        call fail('solver', 'preconditioner', "must be 'none', 'lumped', 'dirichlet' or 'auto'", s%preconditioner)
-      if (.not. (s%preconditioner_switch > 1 .and. s%preconditioner_switch <= huge(1.0_dp))) &
-        call fail('solver', 'preconditioner_switch', 'must be > 1 (a condition number)', &
-                  reals([s%preconditioner_switch]))
+      call s%dual%check(variable, rule, got)
+      if (len(variable) > 0) call fail('solver', variable, rule, got)
+      call s%f_action%check(variable, rule, got)
+      if (len(variable) > 0) call fail('solver', variable, rule, got)
+      call s%coarse%check(variable, rule, got)
+      if (len(variable) > 0) call fail('solver', variable, rule, got)
+      call s%local%check(variable, rule, got)
+      if (len(variable) > 0) call fail('solver', variable, rule, got)
+      call s%scaling%check(variable, rule, got)
+      if (len(variable) > 0) call fail('solver', variable, rule, got)
+      call s%preconditioner%check(variable, rule, got)
+      if (len(variable) > 0) call fail('solver', variable, rule, got)
     end associate
     call p%history%check(variable, rule, got)
     if (len(variable) > 0) call fail('history', variable, rule, got)
@@ -898,19 +815,10 @@ contains
                     'its height &mesh lengths(3) at any step', reals([minval(step_gaps)]))
       end associate
     end if
-    associate (r => p%reconstruction)
-      if (.not. one_of(r%method, [character(len=8) :: 'new', 'standard', 'both'])) &
-        call fail('reconstruction', 'method', "must be 'new', 'standard' or 'both'", r%method)
-      if (r%active_tol < 0 .or. r%active_tol >= 1) &
-        call fail('reconstruction', 'active_tol', 'must be in [0, 1)', reals([r%active_tol]))
-      if (r%kkt_tol <= 0) call fail('reconstruction', 'kkt_tol', 'must be > 0', reals([r%kkt_tol]))
-    end associate
-    associate (o => p%output)
-      if (len_trim(o%directory) == 0) call fail('output', 'directory', 'must not be empty', "''")
-      if (len_trim(o%run_name) == 0 .or. verify(trim(o%run_name), &
-          'abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-.') /= 0) &
-        call fail('output', 'run_name', 'must be a non-empty word of letters, digits, _ - .', o%run_name)
-    end associate
+    call p%reconstruction%check(variable, rule, got)
+    if (len(variable) > 0) call fail('reconstruction', variable, rule, got)
+    call p%output%check(variable, rule, got)
+    if (len(variable) > 0) call fail('output', variable, rule, got)
 
   contains
 
@@ -941,36 +849,13 @@ contains
     end associate
   end function input_warnings
 
-  !> The ordering of the subdomain factorizations that `&solver local_ordering`
-  !> asks for, when the largest subdomain (or cluster) of the run has
-  !> `max_ndof` dofs: 'amd' and 'metis' as given; 'auto' (the default) is
-  !> MUMPS's AMD up to amd_max_dofs dofs (no METIS call per subdomain) and
-  !> METIS nested dissection above (its factors make the solves faster).
-  pure function local_ordering_for(requested, max_ndof) result(used)
-    character(len=*), intent(in) :: requested
-    integer(i8), intent(in) :: max_ndof
-    character(len=8) :: used
-    used = requested
-    if (requested /= 'auto') return
-    used = merge('amd     ', 'metis   ', max_ndof <= amd_max_dofs)
-  end function local_ordering_for
-
-  !> The local solver that `&solver local_solver` asks for, when the largest
-  !> subdomain (or cluster) of the run has `max_ndof` dofs; `hybrid`: clusters
-  !> (hybrid TFETI). 'dense', 'block' and 'subdomain' as given; 'auto' (the
-  !> default) is the dense split K^+ (kplus_dense) up to dense_max_dofs dofs
-  !> in plain TFETI, one MUMPS factorization per rank ('block') otherwise.
-  !> Where the subdomains form classes of congruent ones (share_subdomains),
-  !> K^+ is shared per class whatever this says.
-  pure function local_solver_for(requested, max_ndof, hybrid) result(used)
-    character(len=*), intent(in) :: requested
-    integer(i8), intent(in) :: max_ndof
-    logical, intent(in) :: hybrid
-    character(len=10) :: used
-    used = requested
-    if (requested /= 'auto') return
-    used = merge('dense     ', 'block     ', max_ndof <= dense_max_dofs .and. .not. hybrid)
-  end function local_solver_for
+  !> The settings of the FETI operators' components, as the groups gave them.
+  function feti_settings_of(p) result(s)
+    type(params_t), intent(in) :: p
+    type(feti_settings_t) :: s
+    s = feti_settings_t(p%mesh, p%material, p%load, p%boundary, p%obstacle, p%solver%scaling, &
+                        p%solver%local, p%solver%f_action, p%solver%coarse)
+  end function feti_settings_of
 
   !> `&mesh cluster = 0, 0, 0` (the default): replace it by `auto_cluster`'s
   !> choice for `nranks` ranks, and record that and why (cluster_auto,
@@ -1011,11 +896,11 @@ contains
         reason = "plain TFETI: hybrid TFETI needs decomposition = 'box'"
       else if (p%material%variation /= 'none') then
         reason = "plain TFETI: hybrid TFETI needs &material variation = 'none'"
-      else if (p%solver%preconditioner == 'dirichlet') then
+      else if (p%solver%preconditioner%preconditioner == 'dirichlet') then
         reason = "plain TFETI: hybrid TFETI does not take &solver preconditioner = 'dirichlet'"
-      else if (p%solver%f_action == 'explicit') then
+      else if (p%solver%f_action%f_action == 'explicit') then
         reason = "plain TFETI: hybrid TFETI does not take &solver f_action = 'explicit'"
-      else if (p%solver%local_solver == 'dense') then
+      else if (p%solver%local%local_solver == 'dense') then
         reason = "plain TFETI: hybrid TFETI does not take &solver local_solver = 'dense'"
       else if (any(nel > auto_max_nel)) then
         reason = 'plain TFETI: subdomains of more than 2 elements in a direction (clusters pay for H/h <= 2)'
@@ -1244,12 +1129,6 @@ contains
     end do
   end function lower
 
-  logical function one_of(value, allowed)
-    character(len=*), intent(in) :: value
-    character(len=*), intent(in) :: allowed(:)
-    one_of = any(allowed == value)
-  end function one_of
-
   function snippet(text, i) result(s)
     character(len=*), intent(in) :: text
     integer, intent(in) :: i
@@ -1274,9 +1153,4 @@ contains
     write (buf, '(*(g0.6,:," "))') v
     s = trim(buf)
   end function reals
-
-
-
-
-
 end module params

@@ -2,18 +2,16 @@
 !> each phase (printed, and as JSON) and the peak memory of the ranks.
 module report
   use kinds, only: dp, i8, name_len, MPI_INT_I8
-  use build_info, only: fc_version, fc_commit
   use memory_marks, only: memory_mark_count, memory_mark_get
   use proc_status, only: proc_status_bytes
   use timers, only: timer_stat_t, row_phase, row_tree, row_other, row_memory
   use logger, only: log_is_root, log_unit
   use json_writer, only: json_writer_t
-  use params, only: params_t, param_item_t, param_items, group_names
   use mpi_f08, only: MPI_Comm, MPI_Comm_size, MPI_Allreduce, MPI_MAX, MPI_MIN, MPI_SUM
   implicit none
   private
 
-  public :: print_timing_table, timings_json, memory_json, blas_json, params_json
+  public :: print_timing_table, timings_json, memory_json, blas_json
 
 contains
 
@@ -323,66 +321,4 @@ contains
     call w%end_object()
     json = w%text()
   end function blas_json
-
-  !> The parameters as a JSON object (the "case" of report.json): "file" and
-  !> one object per namelist group, from the same table as the echo.
-  function params_json(p) result(json)
-    type(params_t), intent(in) :: p
-    character(len=:), allocatable :: json
-    type(json_writer_t) :: w
-    type(param_item_t), allocatable :: items(:)
-    integer :: g, k
-    call w%begin_object()
-    call w%add('version', fc_version)
-    call w%add('commit', fc_commit)
-    call w%add('file', trim(p%file))
-    do g = 1, size(group_names)
-      call param_items(p, trim(group_names(g)), items)
-      call w%begin_object(trim(group_names(g)))
-      do k = 1, size(items)
-        call add_item(items(k))
-      end do
-      if (group_names(g) == 'mesh') then      ! the automatic cluster choice (not namelist variables)
-        call w%add('cluster_auto', p%mesh%cluster_auto)
-        call w%add('cluster_choice', trim(p%mesh%cluster_choice))
-      end if
-      call w%end_object()
-    end do
-    call w%end_object()
-    json = w%text()
-  contains
-    subroutine add_item(item)
-      type(param_item_t), intent(in) :: item
-      integer :: v
-      if (item%n > 1) call w%begin_array(trim(item%name))
-      do v = 1, item%n
-        call add_value(item%n > 1, trim(item%name), item%kind, trim(item%values(v)))
-      end do
-      if (item%n > 1) call w%end_array()
-    end subroutine add_item
-    !> One value: appended to the open array, or the member `key`.
-    subroutine add_value(in_array, key, kind, text)
-      logical, intent(in) :: in_array
-      character(len=*), intent(in) :: key, text
-      character, intent(in) :: kind
-      real(dp) :: x
-      integer(i8) :: n
-      select case (kind)
-      case ('s')
-        if (in_array) call w%append(text)
-        if (.not. in_array) call w%add(key, text)
-      case ('l')
-        if (in_array) call w%append(text == 'T')
-        if (.not. in_array) call w%add(key, text == 'T')
-      case ('r')
-        read (text, *) x
-        if (in_array) call w%append(x)
-        if (.not. in_array) call w%add(key, x)
-      case default
-        read (text, *) n
-        if (in_array) call w%append(n)
-        if (.not. in_array) call w%add(key, n)
-      end select
-    end subroutine add_value
-  end function params_json
 end module report

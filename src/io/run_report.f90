@@ -6,14 +6,15 @@ module run_report
   use kinds, only: dp, ip, i8, MPI_INT_I8, MPI_REAL_DP
   use timers, only: timer_stat_t
   use logger, only: log_message
-  use params, only: params_t, param_item_t, param_items, default_params, input_warnings
+  use output_settings, only: output_settings_t
+  use reconstruction_settings, only: reconstruction_settings_t
   use feti_operators, only: feti_t, feti_sizes_t
   use coarse_problem, only: coarse_problem_t
   use smalbe, only: smalbe_t
   use tfeti_dualization, only: tfeti_dualization_t, dual_solution_t
   use contact_summary, only: contact_summary_t
   use json_writer, only: json_writer_t
-  use report, only: timings_json, memory_json, blas_json, params_json
+  use report, only: timings_json, memory_json, blas_json
   use blas_threads, only: blas_in_use
   use build_info, only: fc_source_dir
   use file_system, only: absolute_path, path_exists
@@ -23,13 +24,25 @@ module run_report
 
   public :: write_run_report, log_where_to_look
 
+  !> What the input layer says about the run's input: the "case" object of
+  !> report.json (the settings of every group), the warnings about the input,
+  !> and the solver variant ('name=value' of the &solver settings that differ
+  !> from their defaults, or 'default').
+  type, public :: run_case_t
+    character(len=:), allocatable :: case_json
+    character(len=1024), allocatable :: warnings(:)
+    character(len=:), allocatable :: variant
+  end type run_case_t
+
 contains
 
-  !> Write <p%output%directory>/report.json. `seconds`: the solve and, within
-  !> it, the F actions and the coarse solves (tfeti_dualization%solve);
-  !> `stats`: the reduced timers. Collective.
-  subroutine write_run_report(p, dual, solver, sol, contact, stats, seconds, history)
-    type(params_t), intent(in) :: p
+  !> Write <output%directory>/report.json. `run_case`: the input's part;
+  !> `seconds`: the solve and, within it, the F actions and the coarse solves
+  !> (tfeti_dualization%solve); `stats`: the reduced timers. Collective.
+  subroutine write_run_report(run_case, output, reconstruction, dual, solver, sol, contact, stats, seconds, history)
+    type(run_case_t), intent(in) :: run_case
+    type(output_settings_t), intent(in) :: output
+    type(reconstruction_settings_t), intent(in) :: reconstruction
     type(tfeti_dualization_t), intent(inout), target :: dual
     type(smalbe_t), intent(in) :: solver
     type(dual_solution_t), intent(in) :: sol
@@ -48,7 +61,6 @@ contains
     real(dp) :: f_seconds, flops(2), f_flops, switch_estimate
     integer :: switch_at
     integer :: nranks, ierr, k
-    character(len=1024), allocatable :: warnings(:)
 
     op => dual%operators()
     n = op%sizes()
@@ -61,11 +73,10 @@ contains
     f_seconds = stat_max(stats, 'F action', 0.0_dp)/max(op%f_applications(), 1_i8)
 
     call js%begin_object()
-    call js%add_raw('case', params_json(p))
-    warnings = input_warnings(p)
+    call js%add_raw('case', run_case%case_json)
     call js%begin_array('warnings')
-    do k = 1, size(warnings)
-      call js%append(trim(warnings(k)))
+    do k = 1, size(run_case%warnings)
+      call js%append(trim(run_case%warnings(k)))
     end do
     call js%end_array()
     call js%begin_object('sizes')
@@ -79,7 +90,7 @@ contains
     call solver%report(js)
     call js%add_each([character(len=8) :: 'rho', 'norm_pfp'], [dual%rho(), op%norm_pfp()])
     call js%add_each([character(len=16) :: 'f_applications', 'coarse_solves'], [op%f_applications(), op%coarse_solves()])
-    call js%add('variant', solver_variant(p))
+    call js%add('variant', run_case%variant)
     call js%add('preconditioner', dual%preconditioner_name())
     ! 'auto': the Hessian count at the switch to 'dirichlet' and the estimate that made it (null: none)
     call dual%preconditioner_switch(switch_at, switch_estimate)
@@ -96,10 +107,10 @@ contains
                       'feasibility', 'dual_feasibility', 'complementarity'], &
                      [sol%kkt%equilibrium, sol%kkt%gluing, sol%kkt%dirichlet, sol%kkt%penetration, sol%kkt%equality, &
                       sol%kkt%feasibility, sol%kkt%dual_feasibility, sol%kkt%complementarity])
-    call js%add('passed', sol%kkt%worst() <= p%reconstruction%kkt_tol)
+    call js%add('passed', sol%kkt%worst() <= reconstruction%kkt_tol)
     call js%end_object()
     call js%begin_object('reconstruction')
-    call js%add('method', trim(p%reconstruction%method))
+    call js%add('method', trim(reconstruction%method))
     if (sol%alpha_difference >= 0) then
       call js%add('alpha_difference', sol%alpha_difference)
     else
@@ -155,7 +166,7 @@ contains
                       seconds(3)/max(seconds(1), tiny(1.0_dp))])
     call js%end_object()
     call js%end_object()
-    call js%write_file(trim(p%output%directory)//'/report.json', op%comm())
+    call js%write_file(trim(output%directory)//'/report.json', op%comm())
 
   contains
 
@@ -173,70 +184,24 @@ contains
     end subroutine add_stat_max
   end subroutine write_run_report
 
-  !> The solver variant of the run: the &solver settings that differ from their
-  !> defaults, as 'name=value' separated by ', ' (values as the namelist
-  !> writes them; `monitor` left out: it changes no iterate), or 'default'.
-  function solver_variant(p) result(text)
-    type(params_t), intent(in) :: p
-    character(len=:), allocatable :: text
-    type(param_item_t), allocatable :: items(:), defaults(:)
-    integer :: k, j, i
-    call param_items(p, 'solver', items)
-    call param_items(default_params(), 'solver', defaults)
-    text = ''
-    do k = 1, size(items)
-      if (items(k)%name == 'monitor') cycle
-      j = 0
-      do i = 1, size(defaults)
-        if (defaults(i)%name == items(k)%name) j = i
-      end do
-      if (j > 0) then
-        if (all(items(k)%values == defaults(j)%values)) cycle
-      end if
-      if (len(text) > 0) text = text//', '
-      text = text//trim(items(k)%name)//'='//short(items(k)%values(1), items(k)%kind)
-      do j = 2, items(k)%n
-        text = text//','//short(items(k)%values(j), items(k)%kind)
-      end do
-    end do
-    if (len(text) == 0) text = 'default'
-  contains
-    !> A real without the trailing zeros of its mantissa (2.0000 -> 2.0, 1.5000E-08 -> 1.5E-08).
-    function short(value, kind) result(v)
-      character(len=*), intent(in) :: value
-      character, intent(in) :: kind
-      character(len=:), allocatable :: v, mantissa
-      integer :: e
-      v = trim(adjustl(value))
-      if (kind /= 'r' .or. index(v, '.') == 0) return
-      e = scan(v, 'EeDd')
-      if (e == 0) e = len(v) + 1
-      mantissa = v(1:e - 1)
-      do while (len(mantissa) > 1)
-        if (mantissa(len(mantissa):len(mantissa)) /= '0' .or. &
-            mantissa(len(mantissa) - 1:len(mantissa) - 1) == '.') exit
-        mantissa = mantissa(1:len(mantissa) - 1)
-      end do
-      v = mantissa//v(e:)
-    end function short
-  end function solver_variant
-
   !> Where the output is and how to look at it (a user's first question), with
   !> absolute paths: the hints work from any folder (the plotting tool of the
   !> sources the program was built from; relative to them when they moved).
-  subroutine log_where_to_look(p)
-    type(params_t), intent(in) :: p
+  !> `hertz`: the obstacle is a sphere (the contact pressure compares with Hertz's).
+  subroutine log_where_to_look(output, hertz)
+    type(output_settings_t), intent(in) :: output
+    logical, intent(in) :: hertz
     character(len=:), allocatable :: dir, tool
-    dir = absolute_path(p%output%directory)
+    dir = absolute_path(output%directory)
     tool = fc_source_dir//'/tools/plots.py'
     if (.not. path_exists(tool)) tool = 'tools/plots.py (in the feticontact sources)'
-    if (p%output%write_hdf5) then
-      call log_message('output: '//dir//'/'//trim(p%output%run_name)//'.xdmf (fields for ParaView; '// &
+    if (output%write_hdf5) then
+      call log_message('output: '//dir//'/'//trim(output%run_name)//'.xdmf (fields for ParaView; '// &
                        'its grid "contact" holds the contact pressure and gap)')
-      if (p%obstacle%shape == 'sphere') call log_message('contact pressure against Hertz: '// &
+      if (hertz) call log_message('contact pressure against Hertz: '// &
         '/usr/bin/python3 '//tool//' hertz '//dir//' --figures '//dir)
     end if
-    if (p%output%write_report) call log_message('report: '//dir//'/report.json (settings, iterations, '// &
+    if (output%write_report) call log_message('report: '//dir//'/report.json (settings, iterations, '// &
                                                 'KKT residuals, timings)')
   end subroutine log_where_to_look
 

@@ -28,7 +28,7 @@
 !> docs/RESULTS.md "Dense local solver"). Memory per subdomain:
 !> n_I (n_I+1)/2 + n_D (n_D+1)/2 values and the nonzeros of K_ID; the
 !> factorization costs n^3/3 flops, so it is meant for small subdomains
-!> (`local_solver = 'auto'` takes it up to `params::dense_max_dofs`).
+!> (`local_solver = 'auto'` takes it up to `local_settings::dense_max_dofs`).
 !> With the fixing block inside D x D (schur_ok), S of K itself is
 !> U_S^T U_S minus that block: `schur_product`, the Dirichlet
 !> preconditioner's local operator at no set-up cost.
@@ -107,21 +107,13 @@ contains
     call this%init_split(subs, regularization, ptr, dofs)
   end subroutine init
 
-  !> Factorize every subdomain's K_reg split along its touched dofs: those of
-  !> subdomain s are touched(tptr(s)+1:tptr(s+1)), ascending local dof numbers.
-  subroutine init_split(this, subs, regularization, tptr, touched)
-    class(kplus_dense_t), intent(inout) :: this
+  !> The sizes and offsets of the split blocks of `subs` (the touched dofs of
+  !> subdomain s: tptr(s)+1:tptr(s+1)) and the arrays that hold them.
+  subroutine split_layout(this, subs, tptr)
+    type(kplus_dense_t), intent(inout) :: this
     type(subdomain_t), intent(in) :: subs(:)
-    real(dp), intent(in) :: regularization
-    integer(ip), intent(in) :: tptr(:), touched(:)
-    integer(ip), allocatable :: irn(:), jcn(:), perm(:), pos(:), fdofs(:)
-    real(dp), allocatable :: a(:), kd(:, :), fblk(:, :)
-    logical, allocatable :: is_d(:), allowed(:)
-    integer(ip) :: s, n, ni, nd, i, j, k, e, nimax, ndmax
-    integer(i8) :: o
-    integer :: info
-
-    call this%free()
+    integer(ip), intent(in) :: tptr(:)
+    integer(ip) :: s, n, ni, nd, nimax, ndmax
     this%nblocks = size(subs, kind=ip)
     if (size(tptr) /= this%nblocks + 1) call fatal_error('kplus_dense%init_split: tptr must have nblocks+1 entries')
     allocate (this%offset(this%nblocks + 1), this%ni(this%nblocks), this%nd(this%nblocks), &
@@ -157,33 +149,61 @@ contains
     allocate (this%fpos(0), this%fblock(0))
     this%fptr(1) = 0
     this%fboff(1) = 0
+  end subroutine split_layout
+
+  !> The split of block `s` (n dofs): is_d(i) whether dof i is touched, pos(i)
+  !> its position in I (1..ni) or D (1..nd); this%idof and this%ddof filled.
+  subroutine split_positions(this, s, n, tptr, touched, is_d, pos)
+    type(kplus_dense_t), intent(inout) :: this
+    integer(ip), intent(in) :: s, n, tptr(:), touched(:)
+    logical, allocatable, intent(inout) :: is_d(:)
+    integer(ip), allocatable, intent(inout) :: pos(:)
+    integer(ip) :: i, k
+    if (allocated(is_d)) deallocate (is_d, pos)
+    allocate (is_d(n), pos(n))
+    is_d = .false.
+    do k = 1, this%nd(s)
+      i = touched(tptr(s) + k)
+      if (i < 1 .or. i > n) call fatal_error('kplus_dense%init_split: touched dof out of range')
+      if (is_d(i)) call fatal_error('kplus_dense%init_split: a touched dof is listed twice')
+      if (k > 1) then
+        if (i < touched(tptr(s) + k - 1)) call fatal_error('kplus_dense%init_split: touched dofs must ascend')
+      end if
+      is_d(i) = .true.
+      pos(i) = k
+      this%ddof(this%dptr(s) + k) = i
+    end do
+    k = 0
+    do i = 1, n
+      if (is_d(i)) cycle
+      k = k + 1
+      pos(i) = k
+      this%idof(this%iptr(s) + k) = i
+    end do
+  end subroutine split_positions
+
+  !> Factorize every subdomain's K_reg split along its touched dofs: those of
+  !> subdomain s are touched(tptr(s)+1:tptr(s+1)), ascending local dof numbers.
+  subroutine init_split(this, subs, regularization, tptr, touched)
+    class(kplus_dense_t), intent(inout) :: this
+    type(subdomain_t), intent(in) :: subs(:)
+    real(dp), intent(in) :: regularization
+    integer(ip), intent(in) :: tptr(:), touched(:)
+    integer(ip), allocatable :: irn(:), jcn(:), perm(:), pos(:), fdofs(:)
+    real(dp), allocatable :: a(:), kd(:, :), fblk(:, :)
+    logical, allocatable :: is_d(:), allowed(:)
+    integer(ip) :: s, n, ni, nd, i, j, k, e
+    integer(i8) :: o
+    integer :: info
+
+    call this%free()
+    call split_layout(this, subs, tptr)
 
     do s = 1, this%nblocks
       n = subs(s)%ndof
       ni = this%ni(s)
       nd = this%nd(s)
-      ! the split: position of every dof in I (1..ni) or D (1..nd)
-      if (allocated(is_d)) deallocate (is_d, pos)
-      allocate (is_d(n), pos(n))
-      is_d = .false.
-      do k = 1, nd
-        i = touched(tptr(s) + k)
-        if (i < 1 .or. i > n) call fatal_error('kplus_dense%init_split: touched dof out of range')
-        if (is_d(i)) call fatal_error('kplus_dense%init_split: a touched dof is listed twice')
-        if (k > 1) then
-          if (i < touched(tptr(s) + k - 1)) call fatal_error('kplus_dense%init_split: touched dofs must ascend')
-        end if
-        is_d(i) = .true.
-        pos(i) = k
-        this%ddof(this%dptr(s) + k) = i
-      end do
-      k = 0
-      do i = 1, n
-        if (is_d(i)) cycle
-        k = k + 1
-        pos(i) = k
-        this%idof(this%iptr(s) + k) = i
-      end do
+      call split_positions(this, s, n, tptr, touched, is_d, pos)
       ! fixing nodes among the nodes whose three dofs are touched, where
       ! they fix the rigid body motions: then K_reg differs from K on D x D
       ! only, and S of K is U_S^T U_S minus the fixing block (schur_product)

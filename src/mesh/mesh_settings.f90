@@ -19,8 +19,8 @@ module mesh_settings
     character(len=name_len) :: decomposition = 'box'  !< 'box' | 'metis'
     character(len=name_len) :: mapping = 'block'      !< subdomains to ranks: 'block' | 'metis'
     !> hybrid TFETI: subdomains per cluster per direction (1,1,1: plain TFETI;
-    !> 0,0,0: chosen by `auto_cluster` when `read_params` reads the input; a
-    !> params_t made in code and never resolved keeps 0,0,0 = plain TFETI)
+    !> 0,0,0: chosen by `auto_cluster` when `read_params` reads the input;
+    !> settings made in code and never resolved keep 0,0,0 = plain TFETI)
     integer(ip) :: cluster(3) = [0, 0, 0]
     !> decomposition = 'metis': elements per block edge of the block grid METIS
     !> partitions (0: automatic, see src/mesh/decomposition.f90)

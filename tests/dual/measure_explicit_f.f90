@@ -13,7 +13,7 @@
 program measure_explicit_f
   use kinds, only: dp, ip
   use logger, only: logger_init
-  use params, only: params_t
+  use params, only: params_t, feti_settings_of
   use feti_operators, only: feti_t
   use dual_problem, only: dual_problem_t
   use smalbe, only: smalbe_t, smalbe_settings_t
@@ -46,7 +46,7 @@ program measure_explicit_f
     p%material%variation = 'checkerboard'
     p%material%contrast = contrast
   end if
-  p%solver%f_storage = storage
+  p%solver%f_action%f_storage = storage
   if (rank == 0) write (*, '(2a)') 'explicit storage ', trim(storage)
   call compare(p)
   call MPI_Finalize(ierr)
@@ -60,11 +60,11 @@ contains
     real(dp), allocatable :: x(:), y(:), px(:), fi(:), fe(:), fyi(:), fye(:), nui(:), nue(:)
     integer(ip) :: n, k
     pi = p
-    pi%solver%f_action = 'implicit'
+    pi%solver%f_action%f_action = 'implicit'
     pe = p
-    pe%solver%f_action = 'explicit'
-    call opi%setup(pi, MPI_COMM_WORLD)
-    call ope%setup(pe, MPI_COMM_WORLD)
+    pe%solver%f_action%f_action = 'explicit'
+    call opi%setup(feti_settings_of(pi), MPI_COMM_WORLD)
+    call ope%setup(feti_settings_of(pe), MPI_COMM_WORLD)
     n = opi%n_own()
     allocate (x(n), y(n), px(n), fi(n), fe(n), fyi(n), fye(n))
     if (rank == 0) write (*, '(a,es10.3,a,es10.3)') 'contrast ', p%material%contrast, '  ||PFP|| implicit/explicit - 1: ', &
@@ -170,7 +170,7 @@ contains
     type(dual_problem_t) :: hat
     type(smalbe_t) :: solver
     type(smalbe_settings_t) :: sp
-    call hat%init(op, p%solver%rho_scale)
+    call hat%init(op, p%solver%dual%rho_scale)
     sp = p%solver%smalbe
     sp%tol = tol
     sp%max_hessian = 20000

@@ -8,7 +8,7 @@
 program measure_reconstruction
   use kinds, only: dp, ip
   use logger, only: logger_init
-  use params, only: params_t
+  use params, only: params_t, feti_settings_of
   use feti_operators, only: feti_t, local_field_t
   use dual_problem, only: dual_problem_t
   use smalbe, only: smalbe_t, smalbe_settings_t
@@ -41,10 +41,10 @@ contains
     type(kkt_residuals_t) :: rn, rs
     real(dp) :: tol, r(3)
     integer(ip) :: k, nref
-    call op%setup(p, MPI_COMM_WORLD)
+    call op%setup(feti_settings_of(p), MPI_COMM_WORLD)
     allocate (nu(op%n_own()), lambda(op%n_own()), g(op%n_own()), a_new(op%n_coarse()), &
               a_std(op%n_coarse()), a_ref(op%n_coarse()), u(op%nlocal()))
-    call hat%init(op, p%solver%rho_scale)
+    call hat%init(op, p%solver%dual%rho_scale)
     call solve_dual(p, op, hat, 1.0e-12_dp, nu, muhat, label)
     lambda = nu + op%lambda_tilde_vector()
     call dual_gradient(op, lambda, g)

@@ -1,0 +1,74 @@
+!> The settings of the rigid obstacle (`&obstacle`, docs/INPUT.md): its
+!> shape, radius and initial gap, the one home of their defaults, ranges and
+!> namelist variables (the gap against the body's height is params'
+!> check_params). Used by constraints (the contact rows of B and the gaps).
+module obstacle_settings
+  use kinds, only: dp, name_len
+  use text, only: lower_case, reals_text
+  implicit none
+  private
+
+  type, public :: obstacle_settings_t
+    character(len=name_len) :: shape = 'sphere'  !< 'sphere' | 'plane' | 'none'
+    real(dp) :: radius = 1  !< sphere radius [mm]
+    real(dp) :: gap = 0  !< initial gap below z = 0 [mm]
+  contains
+    procedure :: check => obstacle_settings_check
+    procedure :: read_namelist => obstacle_settings_read
+    procedure :: write_namelist => obstacle_settings_write
+  end type obstacle_settings_t
+
+contains
+
+  !> The first value out of its range: `variable` its name ('' if none),
+  !> `rule` the allowed values, `got` the value(s).
+  subroutine obstacle_settings_check(self, variable, rule, got)
+    class(obstacle_settings_t), intent(in) :: self
+    character(len=:), allocatable, intent(out) :: variable, rule, got
+    variable = ''
+    rule = ''
+    got = ''
+    if (.not. any(self%shape == [character(len=8) :: 'sphere', 'plane', 'none'])) then
+      call bad('shape', "must be 'sphere', 'plane' or 'none'", self%shape)
+    else if (self%radius <= 0) then
+      call bad('radius', 'must be > 0', reals_text([self%radius]))
+    end if
+  contains
+    subroutine bad(name, text, value)
+      character(len=*), intent(in) :: name, text, value
+      variable = name
+      rule = text
+      got = trim(value)
+    end subroutine bad
+  end subroutine obstacle_settings_check
+
+  !> Read this component's variables from the group text `group`
+  !> ('&obstacle ... /'); strings lower case.
+  subroutine obstacle_settings_read(self, group, status, msg)
+    class(obstacle_settings_t), intent(inout) :: self
+    character(len=*), intent(in) :: group
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    character(len=name_len) :: shape
+    real(dp) :: radius, gap
+    namelist /obstacle/ shape, radius, gap
+    shape = self%shape; radius = self%radius; gap = self%gap
+    read (group, nml=obstacle, iostat=status, iomsg=msg)
+    if (status /= 0) return
+    self%shape = lower_case(shape); self%radius = radius; self%gap = gap
+  end subroutine obstacle_settings_read
+
+  !> Write this component's variables as the namelist '&obstacle ... /' (strings quoted).
+  subroutine obstacle_settings_write(self, lines, status, msg)
+    class(obstacle_settings_t), intent(in) :: self
+    character(len=*), intent(out) :: lines(:)
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    character(len=name_len) :: shape
+    real(dp) :: radius, gap
+    namelist /obstacle/ shape, radius, gap
+    shape = self%shape; radius = self%radius; gap = self%gap
+    lines = ''
+    write (lines, nml=obstacle, delim='quote', iostat=status, iomsg=msg)
+  end subroutine obstacle_settings_write
+end module obstacle_settings
