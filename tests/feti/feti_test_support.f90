@@ -254,10 +254,13 @@ contains
 
   !> cond(G G^T) = lambda_max / lambda_min from LAPACK's dsyev on the dense G G^T, assembled
   !> column by column as G (G^T e_j) (the coarse blocks of all ranks in rank order), never
-  !> through the coarse solve under test. For small cases only (n_coarse^2 doubles on every
-  !> rank). Collective.
-  real(dp) function coarse_condition(op) result(cond)
+  !> through the coarse solve under test. `mask` (per owned dual row): G_M G_M^T of the rows in
+  !> it instead (G (mask .* G^T e_j)); `lmax`: its largest eigenvalue. For small cases only
+  !> (n_coarse^2 doubles on every rank). Collective.
+  real(dp) function coarse_condition(op, mask, lmax) result(cond)
     type(feti_t), intent(inout) :: op
+    logical, intent(in), optional :: mask(:)
+    real(dp), intent(out), optional :: lmax
     real(dp), allocatable :: a(:, :), e(:), y(:), gy(:), w(:), work(:)
     integer, allocatable :: counts(:), displs(:)
     integer :: n, ntot, nranks, rank, j, info, ierr, r
@@ -276,6 +279,7 @@ contains
       e = 0
       if (j > displs(rank + 1) .and. j <= displs(rank + 1) + n) e(j - displs(rank + 1)) = 1
       call op%apply_gt(e, y)
+      if (present(mask)) y = merge(y, 0.0_dp, mask)
       call op%apply_g(y, gy)
       call MPI_Allgatherv(gy, n, MPI_REAL_DP, a(:, j), counts, displs, MPI_REAL_DP, op%comm(), ierr)
     end do
@@ -285,5 +289,6 @@ contains
     if (info /= 0) error stop 'coarse_condition: dsyev failed'
     if (.not. w(1) > 0) error stop 'coarse_condition: G G^T is not positive definite'
     cond = w(ntot)/w(1)
+    if (present(lmax)) lmax = w(ntot)
   end function coarse_condition
 end module feti_test_support
