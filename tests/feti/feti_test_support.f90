@@ -138,11 +138,13 @@ contains
     real(dp), allocatable :: a(:, :), w(:), work(:), vals(:), r(:)
     integer(ip), allocatable :: irn(:), jcn(:), perm(:)
     logical, allocatable :: allowed(:)
+    type(params_t) :: defaults
     real(dp) :: mine(2), largest(2), reg
     integer(ip) :: ls, k, i, j
     integer :: n, info, ierr
     logical :: dense_solver
-    reg = default_params()%solver%regularization
+    defaults = default_params()
+    reg = defaults%solver%regularization
     if (present(regularization)) reg = regularization
     subs => op%subdomains()
     dense_solver = op%local_solver() == 'dense'
