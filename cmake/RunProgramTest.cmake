@@ -2,9 +2,16 @@
 # status and output. A run that does not end within TIMEOUT seconds fails
 # (this is how a hang of any rank is caught). With EXPECT_FAIL the status must
 # be non-zero (and equal EXPECT_STATUS when given) and the output must match.
+# With DIRECT and NP 1 the program starts without mpiexec (an MPI singleton: the same program on
+# one rank, without the launcher's start-up, which costs more than a run that stops at its input).
 separate_arguments(args UNIX_COMMAND "${ARGS}")
+if(DIRECT AND NP EQUAL 1)
+  set(launch ${PROGRAM})
+else()
+  set(launch ${MPIEXEC} --oversubscribe --bind-to none -n ${NP} ${PROGRAM})
+endif()
 execute_process(
-  COMMAND ${MPIEXEC} --oversubscribe --bind-to none -n ${NP} ${PROGRAM} ${args} ${INPUT}
+  COMMAND ${launch} ${args} ${INPUT}
   RESULT_VARIABLE status OUTPUT_VARIABLE out ERROR_VARIABLE err TIMEOUT ${TIMEOUT})
 set(all "${out}\n${err}")
 message("exit status: ${status}\n--- output ---\n${all}")

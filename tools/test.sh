@@ -5,7 +5,9 @@
 #   tools/test.sh --release [ctest args...]   Release build in build-release/ (-O3 -march=native):
 #                                             the same tests with FMA, vectorization and the BLAS
 #                                             kernels an optimized build uses (the cluster test,
-#                                             label `cluster`, runs in the Debug pass only)
+#                                             label `cluster`, and the tests whose outcome does not
+#                                             depend on the build type, label `build_independent`:
+#                                             input errors, run in the Debug pass only)
 set -euo pipefail
 FETICONTACT_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 source "$FETICONTACT_ROOT/tools/setup.sh"
@@ -15,7 +17,7 @@ if [ "${1:-}" = "--release" ]; then
   build=${FETICONTACT_TEST_BUILD:-$FETICONTACT_ROOT/build-release}
   setup_build "$build" Release -DFETICONTACT_TESTS=ON
   cd "$build"
-  exec ctest -j "$(nproc)" --output-on-failure --timeout 900 -LE cluster "$@"
+  exec ctest -j "$(nproc)" --output-on-failure --timeout 900 -LE "cluster|build_independent" "$@"
 fi
 
 build=${FETICONTACT_TEST_BUILD:-$FETICONTACT_ROOT/build-debug}

@@ -5,6 +5,7 @@
         --workdir DIR [--set group:variable=value ...] [--expect-exit N] [--expect-message REGEX] \
         [--check block_exact:TOL] [--check report] [--check xdmf] [--check same_as:DIR:TOL]
         [--check alpha_agree:TOL] [--check switch:yes|no[:seen]] [--check same_switch_as:DIR]
+        [--switch-threshold DIR:inside|above]
 
 The input file is copied with the --set overrides merged into its groups and
 with &output directory pointing into DIR. Every check derives its expected
@@ -515,6 +516,27 @@ def check_switch(outdir, expected, seen=False):
                   % s.get("cg_runs"))
 
 
+def switch_threshold(spec):
+    """&solver preconditioner_switch for an 'auto' run, from the largest face condition
+    estimate E of a 'lumped' run of the same case in DIR (report.json
+    solver.face_condition_estimate: the largest Ritz ratio of its CG runs; the extreme Ritz
+    values of a run move outwards step by step, so E is also the largest running estimate an
+    'auto' run sees before it switches, up to rounding). 'inside': sqrt(E), the geometric
+    middle of [1, E], which the estimate must pass (E >= 4 asserted: a factor >= 2 on either
+    side); 'above': 2 E, which it must not reach. Not a number tuned on one CPU: the bound
+    follows the quantity the switch compares."""
+    folder, mode = spec.rsplit(":", 1)
+    est = solver_report(os.path.join(folder, "out")).get("face_condition_estimate")
+    check(est is not None and est >= 1, "the lumped run in %s has a face condition estimate (%s)" % (folder, est))
+    if est is None or est < 1:
+        return None
+    if mode == "inside":
+        check(est >= 4, "its estimate %.3g >= 4: sqrt(E) is a factor >= 2 from both 1 and E" % est)
+        return est ** 0.5
+    check(mode == "above", "switch threshold mode %s is 'inside' or 'above'" % mode)
+    return 2 * est
+
+
 def check_same_switch_as(outdir, other):
     """The switch point is the same Hessian count as in another run (e.g. another rank count)."""
     a, b = solver_report(outdir), solver_report(other)
@@ -535,7 +557,15 @@ def main():
     ap.add_argument("--expect-message", default=None)
     ap.add_argument("--check", action="append", default=[])
     ap.add_argument("--timeout", type=int, default=600)
+    ap.add_argument("--switch-threshold", default=None)
     args = ap.parse_args()
+    if args.switch_threshold:
+        kappa = switch_threshold(args.switch_threshold)
+        if kappa is None:
+            print("%d passed, %d failed" % (len(PASSED), len(FAILURES)))
+            sys.exit(1)
+        print("preconditioner_switch = %.6g (from %s)" % (kappa, args.switch_threshold))
+        args.set.append("solver:preconditioner_switch=%.17g" % kappa)
 
     shutil.rmtree(os.path.join(args.workdir, "out"), ignore_errors=True)   # no stale outputs
     path, groups = merged_input(args)

@@ -1,30 +1,25 @@
 !> Helpers shared by the FETI tests: parameter sets for small cases,
 !> comparison of distributed dual vectors by their rank-independent keys, and
-!> condition estimates of K_reg and G G^T from which the tests derive their
-!> tolerances (tests/common/tolerances.f90).
+!> the condition numbers of K_reg, G G^T and P F P and the norm of K^+ from
+!> which the tests derive their tolerances (tests/common/tolerances.f90). Each
+!> is computed by LAPACK on the dense assembled matrix, never through the
+!> solves under test (K^+ = K_reg^{-1}, (G G^T)^{-1}, a CG run): a wrong
+!> solver cannot inflate its own bound.
 module feti_test_support
   use kinds, only: dp, ip, i8, MPI_REAL_DP, MPI_INT_I8
   use params, only: params_t, default_params
   use sorting, only: sort_permutation
-  use feti_operators, only: feti_t
+  use feti_operators, only: feti_t, local_field_t
   use subdomain, only: subdomain_t
+  use kplus, only: regularized_system
   use lapack_interfaces, only: dsyev
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Gather, MPI_Gatherv, MPI_INTEGER, MPI_Allreduce, &
     MPI_SUM, MPI_MAX, MPI_Allgather, MPI_Allgatherv
   implicit none
   private
 
-  public :: small_case, gather_keyed, coarse_norm, kplus_condition, coarse_condition, dense_k_condition, &
-            dense_pfp_condition
-
-  !> kplus_condition's estimate (through op%local_solve, the code under test) is bounded before
-  !> use by this factor times the dense LAPACK condition number of K on its range
-  !> (dense_k_condition, independent of K^+). K_reg = K + a rank-6 fixing term, so
-  !> lambda_min(K_reg) <= lambda_7(K), but the fixing nodes leave lambda_min(K_reg) far below
-  !> lambda_7(K): 370 x on test_shared_f's checkerboard (2.6e4 against 70), 4.8e4 x on
-  !> test_dual_preconditioner's case (3.0e6 against 61). The cap 1e6 therefore only stops a K^+
-  !> that inflates its own tolerance grossly (by more than 1e6 / 5e4 = 20 x beyond that).
-  real(dp), parameter :: kplus_condition_cap = 1.0e6_dp
+  public :: small_case, gather_keyed, coarse_norm, kplus_condition, kplus_norm, coarse_condition, &
+            dense_k_condition, dense_pfp_condition
 
 contains
 
@@ -107,68 +102,92 @@ contains
     coarse_norm = sqrt(total)
   end function coarse_norm
 
-  !> Largest cond(K_reg) over all subdomains, estimated as 2 lambda_max(K)
-  !> lambda_max(K^+) by 30 power iterations each on the concatenated local
-  !> vectors (an underestimate of the largest one by a factor of a few at most).
-  real(dp) function kplus_condition(op) result(cond)
+  !> The largest cond(K_reg) = lambda_max / lambda_min over all subdomains (dense_kreg).
+  !> `regularization`: `&solver regularization` of the case (default: the default's).
+  !> Collective.
+  real(dp) function kplus_condition(op, regularization) result(cond)
     type(feti_t), intent(inout), target :: op
-    type(subdomain_t), pointer :: subs(:)
-    real(dp), allocatable :: v(:), w(:)
-    integer(ip), allocatable :: offset(:)
-    real(dp) :: lmax(2), mine, dense
-    integer(ip) :: i, ls, n
-    integer :: it, ierr
-    subs => op%subdomains()
-    allocate (offset(size(subs) + 1))
-    offset(1) = 0
-    do ls = 1, size(subs, kind=ip)
-      offset(ls + 1) = offset(ls) + subs(ls)%ndof
-    end do
-    n = offset(size(subs) + 1)
-    allocate (v(n), w(n))
-    do i = 1, n
-      v(i) = 1 + 0.3_dp*sin(2.1_dp*i)
-    end do
-    lmax = 0
-    do it = 1, 30
-      call normalize(v)
-      do ls = 1, op%nlocal()
-        call subs(ls)%K%matvec(v(offset(ls) + 1:offset(ls + 1)), w(offset(ls) + 1:offset(ls + 1)))
-      end do
-      mine = sum(w**2)
-      call MPI_Allreduce(mine, lmax(1), 1, MPI_REAL_DP, MPI_SUM, op%comm(), ierr)
-      lmax(1) = sqrt(lmax(1))
-      v = w
-    end do
-    do i = 1, n
-      v(i) = 1 + 0.3_dp*cos(1.3_dp*i)
-    end do
-    do it = 1, 30
-      call normalize(v)
-      w = v
-      call op%local_solve(w)
-      mine = sum(w**2)
-      call MPI_Allreduce(mine, lmax(2), 1, MPI_REAL_DP, MPI_SUM, op%comm(), ierr)
-      lmax(2) = sqrt(lmax(2))
-      v = w
-    end do
-    cond = 2*lmax(1)*lmax(2)
-    dense = dense_k_condition(op)
-    if (.not. cond <= kplus_condition_cap*dense) then
-      write (*, '(a,es10.3,a,es10.3,a,es10.3,a)') 'kplus_condition: the estimate through K^+ ', cond, ' exceeds ', &
-        kplus_condition_cap, ' x the dense condition number of K on its range ', dense, &
-        ': the local solver under test inflates its own tolerance'
-      error stop 1
-    end if
-  contains
-    subroutine normalize(x)
-      real(dp), intent(inout) :: x(:)
-      real(dp) :: local, total
-      local = sum(x**2)
-      call MPI_Allreduce(local, total, 1, MPI_REAL_DP, MPI_SUM, op%comm(), ierr)
-      x = x/sqrt(total)
-    end subroutine normalize
+    real(dp), intent(in), optional :: regularization
+    real(dp) :: inv_norm
+    call dense_kreg(op, regularization, cond, inv_norm)
   end function kplus_condition
+
+  !> ||K^+|| = the largest 1/lambda_min(K_reg) over all subdomains (dense_kreg): the norm of
+  !> K^+ on the concatenated local vectors. Collective.
+  real(dp) function kplus_norm(op, regularization) result(inv_norm)
+    type(feti_t), intent(inout), target :: op
+    real(dp), intent(in), optional :: regularization
+    real(dp) :: cond
+    call dense_kreg(op, regularization, cond, inv_norm)
+  end function kplus_norm
+
+  !> cond(K_reg) and ||K_reg^{-1}||, largest over the subdomains, from LAPACK's dsyev on the
+  !> dense K_reg = K + rho_f Q_F Q_F^T of every subdomain as kplus::regularized_system builds
+  !> it (the matrix that every local solver factorizes, K^+ = K_reg^{-1}; with `local_solver`
+  !> 'dense' the fixing nodes are chosen among the nodes whose three dofs B touches, as
+  !> kplus_dense does, found here as the nonzeros of B^T r for a random r; per class of
+  !> congruent subdomains ('shared') the fixing nodes, chosen by distances alone, and K_reg are
+  !> those of every member). Independent of the factorizations and solves under test.
+  !> For small subdomains only (ndof^2 doubles). Collective.
+  subroutine dense_kreg(op, regularization, cond, inv_norm)
+    type(feti_t), intent(inout), target :: op
+    real(dp), intent(in), optional :: regularization
+    real(dp), intent(out) :: cond, inv_norm
+    type(subdomain_t), pointer :: subs(:)
+    type(local_field_t), allocatable :: touched(:)
+    real(dp), allocatable :: a(:, :), w(:), work(:), vals(:), r(:)
+    integer(ip), allocatable :: irn(:), jcn(:), perm(:)
+    logical, allocatable :: allowed(:)
+    type(params_t) :: defaults
+    real(dp) :: mine(2), largest(2), reg
+    integer(ip) :: ls, k, i, j
+    integer :: n, info, ierr
+    logical :: dense_solver
+    defaults = default_params()
+    reg = defaults%solver%local%regularization
+    if (present(regularization)) reg = regularization
+    subs => op%subdomains()
+    dense_solver = op%local_solver() == 'dense'
+    allocate (touched(op%nlocal()))
+    do ls = 1, op%nlocal()
+      allocate (touched(ls)%v(subs(ls)%ndof))
+    end do
+    allocate (r(op%n_own()))
+    call op%keyed_random(11, r)
+    r = 1 + abs(r)
+    call op%apply_bt(r, touched)
+    mine = 0
+    do ls = 1, op%nlocal()
+      n = int(subs(ls)%ndof)
+      if (dense_solver) then
+        allowed = [(all_touched(touched(ls)%v(3*k - 2:3*k)), k=1, subs(ls)%nnodes)]
+        call regularized_system(subs(ls), reg, 'amd', irn, jcn, vals, perm, allowed)
+      else
+        call regularized_system(subs(ls), reg, 'amd', irn, jcn, vals, perm)
+      end if
+      allocate (a(n, n), w(n), work(max(1, 3*n)))
+      a = 0
+      do k = 1, size(vals, kind=ip)
+        i = min(irn(k), jcn(k))
+        j = max(irn(k), jcn(k))
+        a(i, j) = a(i, j) + vals(k)
+      end do
+      call dsyev('N', 'U', n, a, n, w, work, size(work), info)
+      if (info /= 0) error stop 'dense_kreg: dsyev failed'
+      if (.not. w(1) > 0) error stop 'dense_kreg: K_reg is not positive definite'
+      mine(1) = max(mine(1), w(n)/w(1))
+      mine(2) = max(mine(2), 1/w(1))
+      deallocate (a, w, work)
+    end do
+    call MPI_Allreduce(mine, largest, 2, MPI_REAL_DP, MPI_MAX, op%comm(), ierr)
+    cond = largest(1)
+    inv_norm = largest(2)
+  contains
+    pure logical function all_touched(v)
+      real(dp), intent(in) :: v(:)
+      all_touched = all(v /= 0)
+    end function all_touched
+  end subroutine dense_kreg
 
   !> The largest condition number over all subdomains of K_s on its range, lambda_max / the
   !> smallest eigenvalue above 1e-10 lambda_max (the rigid modes: 0 to rounding), from LAPACK's
@@ -235,36 +254,43 @@ contains
     cond = w(ntot)/minval(w, mask=w > 1.0e-8_dp*w(ntot))
   end function dense_pfp_condition
 
-  !> cond(G G^T) = lambda_max(G G^T) lambda_max((G G^T)^{-1}), each by 30
-  !> power iterations (G G^T applied as G (G^T z), the inverse by the coarse
-  !> solve), times 2 for the underestimate of power iterations.
-  real(dp) function coarse_condition(op) result(cond)
+  !> cond(G G^T) = lambda_max / lambda_min from LAPACK's dsyev on the dense G G^T, assembled
+  !> column by column as G (G^T e_j) (the coarse blocks of all ranks in rank order), never
+  !> through the coarse solve under test. `mask` (per owned dual row): G_M G_M^T of the rows in
+  !> it instead (G (mask .* G^T e_j)); `lmax`: its largest eigenvalue. For small cases only
+  !> (n_coarse^2 doubles on every rank). Collective.
+  real(dp) function coarse_condition(op, mask, lmax) result(cond)
     type(feti_t), intent(inout) :: op
-    real(dp), allocatable :: z(:), w(:), y(:)
-    real(dp) :: lmax(2)
-    integer(ip) :: i
-    integer :: it
-    allocate (z(op%n_coarse()), w(op%n_coarse()), y(op%n_own()))
-    do i = 1, size(z)
-      z(i) = 1 + 0.3_dp*sin(1.7_dp*i)
+    logical, intent(in), optional :: mask(:)
+    real(dp), intent(out), optional :: lmax
+    real(dp), allocatable :: a(:, :), e(:), y(:), gy(:), w(:), work(:)
+    integer, allocatable :: counts(:), displs(:)
+    integer :: n, ntot, nranks, rank, j, info, ierr, r
+    n = int(op%n_coarse())
+    call MPI_Comm_size(op%comm(), nranks, ierr)
+    call MPI_Comm_rank(op%comm(), rank, ierr)
+    allocate (counts(nranks), displs(nranks))
+    call MPI_Allgather(n, 1, MPI_INTEGER, counts, 1, MPI_INTEGER, op%comm(), ierr)
+    displs(1) = 0
+    do r = 2, nranks
+      displs(r) = displs(r - 1) + counts(r - 1)
     end do
-    lmax = 0
-    do it = 1, 30
-      z = z/coarse_norm(op%comm(), z)
-      call op%apply_gt(z, y)
-      call op%apply_g(y, w)
-      lmax(1) = coarse_norm(op%comm(), w)
-      z = w
+    ntot = sum(counts)
+    allocate (a(ntot, ntot), e(n), y(op%n_own()), gy(n))
+    do j = 1, ntot
+      e = 0
+      if (j > displs(rank + 1) .and. j <= displs(rank + 1) + n) e(j - displs(rank + 1)) = 1
+      call op%apply_gt(e, y)
+      if (present(mask)) y = merge(y, 0.0_dp, mask)
+      call op%apply_g(y, gy)
+      call MPI_Allgatherv(gy, n, MPI_REAL_DP, a(:, j), counts, displs, MPI_REAL_DP, op%comm(), ierr)
     end do
-    do i = 1, size(z)
-      z(i) = 1 + 0.3_dp*cos(0.9_dp*i)
-    end do
-    do it = 1, 30
-      z = z/coarse_norm(op%comm(), z)
-      call op%coarse_solve(z, w)
-      lmax(2) = coarse_norm(op%comm(), w)
-      z = w
-    end do
-    cond = 2*lmax(1)*lmax(2)
+    a = (a + transpose(a))/2
+    allocate (w(ntot), work(3*ntot))
+    call dsyev('N', 'U', ntot, a, ntot, w, work, size(work), info)
+    if (info /= 0) error stop 'coarse_condition: dsyev failed'
+    if (.not. w(1) > 0) error stop 'coarse_condition: G G^T is not positive definite'
+    cond = w(ntot)/w(1)
+    if (present(lmax)) lmax = w(ntot)
   end function coarse_condition
 end module feti_test_support
