@@ -133,16 +133,7 @@ contains
         ! 3. the inverse: lambda, alpha_bar, u, KKT
         call dual%post_solve(nu, solver%muhat, sol)
         call summarize_contact(op, sol%lambda, p%reconstruction%active_tol, contact)
-        rec%total_force = contact%total_force
-        rec%max_pressure = contact%max_pressure
-        rec%contact_radius = contact%contact_radius
-        rec%active_nodes = contact%active_nodes
-        rec%outer = solver%n_outer
-        rec%hessian = solver%n_hessian
-        rec%kkt_worst = sol%kkt%worst()
-        rec%alpha_difference = sol%alpha_difference
-        rec%converged = merge(1, 0, solver%converged())
-        rec%kkt_passed = merge(1, 0, sol%kkt%worst() <= p%reconstruction%kkt_tol)
+        call fill_record(rec, contact, solver, sol, p%reconstruction%kkt_tol)
         ! 4. output of the step
         call timer_start('output')
         if (p%output%write_hdf5) call write_step_fields(p, op, sol, contact, step, comm, rank)
@@ -203,6 +194,25 @@ contains
     call log_where_to_look(p%output, p%obstacle%shape == 'sphere')
     call dual%free()
   end subroutine run_load_history
+
+  !> The step's contact summary, solver counts and KKT outcome into its record.
+  subroutine fill_record(rec, contact, solver, sol, kkt_tol)
+    type(step_record_t), intent(inout) :: rec
+    type(contact_summary_t), intent(in) :: contact
+    type(smalbe_t), intent(in) :: solver
+    type(dual_solution_t), intent(in) :: sol
+    real(dp), intent(in) :: kkt_tol
+    rec%total_force = contact%total_force
+    rec%max_pressure = contact%max_pressure
+    rec%contact_radius = contact%contact_radius
+    rec%active_nodes = contact%active_nodes
+    rec%outer = solver%n_outer
+    rec%hessian = solver%n_hessian
+    rec%kkt_worst = sol%kkt%worst()
+    rec%alpha_difference = sol%alpha_difference
+    rec%converged = merge(1, 0, solver%converged())
+    rec%kkt_passed = merge(1, 0, sol%kkt%worst() <= kkt_tol)
+  end subroutine fill_record
 
   !> The start of the next solve from the last steps held in `ws`:
   !> lambda and the SMALBE multiplier are affine in the load factor while

@@ -365,6 +365,33 @@ contains
     if (self%monitor) call mprgp_summary(self)
   end subroutine mprgp_solve
 
+  !> Work arrays sized for `problem`, counters and status of a new minimize run.
+  subroutine reset_run(self, problem)
+    class(mprgp_t), intent(inout) :: self
+    class(qp_problem_t), intent(in) :: problem
+    integer(ip) :: n
+    n = problem%n
+    call ensure_size(self%p, n)
+    call ensure_size(self%ap, n)
+    call ensure_size(self%w_phi, n)
+    call ensure_size(self%w_x, n)
+    call ensure_size(self%w_g, n)
+    self%n_hessian = 0
+    self%n_iterations = 0
+    self%n_cg = 0
+    self%n_expansion = 0
+    self%n_proportioning = 0
+    self%n_expansion_fallback = 0
+    self%gp_norm = huge(1.0_dp)
+    self%best_gp_norm = huge(1.0_dp)
+    self%n_best = 0
+    self%n_norm_updates = 0
+    self%n_preconditioner = 0
+    self%preconditioned = problem%has_preconditioner()
+    self%status = qp_status_not_run
+    self%message = ''
+  end subroutine reset_run
+
   !> The MPRGP iteration from a feasible x with linear term c (= b_lin).
   !> On entry x >= l (not checked; callers project). With gradient_given,
   !> g must hold A x - c on entry; otherwise it is computed (one Hessian
@@ -386,25 +413,7 @@ contains
     integer :: last_kind                   ! the kind of the last step (the rule's monitor)
 
     n = problem%n
-    call ensure_size(self%p, n)
-    call ensure_size(self%ap, n)
-    call ensure_size(self%w_phi, n)
-    call ensure_size(self%w_x, n)
-    call ensure_size(self%w_g, n)
-    self%n_hessian = 0
-    self%n_iterations = 0
-    self%n_cg = 0
-    self%n_expansion = 0
-    self%n_proportioning = 0
-    self%n_expansion_fallback = 0
-    self%gp_norm = huge(1.0_dp)
-    self%best_gp_norm = huge(1.0_dp)
-    self%n_best = 0
-    self%n_norm_updates = 0
-    self%n_preconditioner = 0
-    self%preconditioned = problem%has_preconditioner()
-    self%status = qp_status_not_run
-    self%message = ''
+    call reset_run(self, problem)
 
     if (.not. gradient_given) then
       call problem%track_reset()
