@@ -39,30 +39,10 @@ contains
     write (u, '(a)', iostat=status, iomsg=msg) '<?xml version="1.0" ?>', &
       '<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>', &
       '<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">', &
-      '  <Domain>', &
-      '    <Grid Name="mesh" GridType="Uniform">', &
-      '      <Topology TopologyType="Hexahedron" NumberOfElements="'//str(nelem)//'" NodesPerElement="8">', &
-      data_item(h5, 'connectivity', nelem, 8, 'Int', 4), &
-      '      </Topology>', &
-      geometry(h5, 'coordinates', nnodes), &
-      attribute(h5, 'displacement', 'Vector', 'Node', nnodes, 3, 'Float', 8), &
-      attribute(h5, 'subdomain', 'Scalar', 'Cell', nelem, 0, 'Int', 4), &
-      attribute(h5, 'von_mises', 'Scalar', 'Cell', nelem, 0, 'Float', 8), &
-      '    </Grid>'
+      '  <Domain>'
     if (status /= 0) return
-    if (ncontact > 0) then
-      write (u, '(a)', iostat=status, iomsg=msg) &
-        '    <Grid Name="contact" GridType="Uniform">', &
-        '      <Topology TopologyType="Polyvertex" NumberOfElements="'//str(ncontact)// &
-        '" NodesPerElement="1">', &
-        data_item(h5, 'contact_vertices', ncontact, 0, 'Int', 4), &
-        '      </Topology>', &
-        geometry(h5, 'contact_coordinates', ncontact), &
-        attribute(h5, 'contact_pressure', 'Scalar', 'Node', ncontact, 0, 'Float', 8), &
-        attribute(h5, 'contact_gap', 'Scalar', 'Node', ncontact, 0, 'Float', 8), &
-        '    </Grid>'
-      if (status /= 0) return
-    end if
+    call write_grids(u, h5, nnodes, nelem, ncontact, status, msg)
+    if (status /= 0) return
     write (u, '(a)', iostat=status, iomsg=msg) '  </Domain>', '</Xdmf>'
     if (status /= 0) return
     close (u, iostat=status, iomsg=msg)
@@ -97,29 +77,9 @@ contains
       write (t, '(es23.15e3)') times(k)
       write (u, '(a)', iostat=status, iomsg=msg) &
         '    <Grid Name="step'//str(int(k, i8))//'" GridType="Collection" CollectionType="Spatial">', &
-        '      <Time Value="'//trim(adjustl(t))//'" />', &
-        '    <Grid Name="mesh" GridType="Uniform">', &
-        '      <Topology TopologyType="Hexahedron" NumberOfElements="'//str(nelem)//'" NodesPerElement="8">', &
-        data_item(h5, 'connectivity', nelem, 8, 'Int', 4), &
-        '      </Topology>', &
-        geometry(h5, 'coordinates', nnodes), &
-        attribute(h5, 'displacement', 'Vector', 'Node', nnodes, 3, 'Float', 8), &
-        attribute(h5, 'subdomain', 'Scalar', 'Cell', nelem, 0, 'Int', 4), &
-        attribute(h5, 'von_mises', 'Scalar', 'Cell', nelem, 0, 'Float', 8), &
-        '    </Grid>'
+        '      <Time Value="'//trim(adjustl(t))//'" />'
       if (status /= 0) return
-      if (ncontact > 0) then
-        write (u, '(a)', iostat=status, iomsg=msg) &
-          '    <Grid Name="contact" GridType="Uniform">', &
-          '      <Topology TopologyType="Polyvertex" NumberOfElements="'//str(ncontact)// &
-          '" NodesPerElement="1">', &
-          data_item(h5, 'contact_vertices', ncontact, 0, 'Int', 4), &
-          '      </Topology>', &
-          geometry(h5, 'contact_coordinates', ncontact), &
-          attribute(h5, 'contact_pressure', 'Scalar', 'Node', ncontact, 0, 'Float', 8), &
-          attribute(h5, 'contact_gap', 'Scalar', 'Node', ncontact, 0, 'Float', 8), &
-          '    </Grid>'
-      end if
+      call write_grids(u, h5, nnodes, nelem, ncontact, status, msg)
       if (status /= 0) return
       write (u, '(a)', iostat=status, iomsg=msg) '    </Grid>'
     end do
@@ -128,6 +88,37 @@ contains
     if (status /= 0) return
     close (u, iostat=status, iomsg=msg)
   end subroutine write_xdmf_series
+
+  !> The grids of one HDF5 file `h5` (escaped) on unit u: "mesh" (hexahedra with the
+  !> displacement, subdomain and von Mises) and, with contact nodes, "contact" (vertices with
+  !> the contact pressure and gap).
+  subroutine write_grids(u, h5, nnodes, nelem, ncontact, status, msg)
+    integer, intent(in) :: u
+    character(len=*), intent(in) :: h5
+    integer(i8), intent(in) :: nnodes, nelem, ncontact
+    integer, intent(out) :: status
+    character(len=*), intent(inout) :: msg
+    write (u, '(a)', iostat=status, iomsg=msg) &
+      '    <Grid Name="mesh" GridType="Uniform">', &
+      '      <Topology TopologyType="Hexahedron" NumberOfElements="'//str(nelem)//'" NodesPerElement="8">', &
+      data_item(h5, 'connectivity', nelem, 8, 'Int', 4), &
+      '      </Topology>', &
+      geometry(h5, 'coordinates', nnodes), &
+      attribute(h5, 'displacement', 'Vector', 'Node', nnodes, 3, 'Float', 8), &
+      attribute(h5, 'subdomain', 'Scalar', 'Cell', nelem, 0, 'Int', 4), &
+      attribute(h5, 'von_mises', 'Scalar', 'Cell', nelem, 0, 'Float', 8), &
+      '    </Grid>'
+    if (status /= 0 .or. ncontact <= 0) return
+    write (u, '(a)', iostat=status, iomsg=msg) &
+      '    <Grid Name="contact" GridType="Uniform">', &
+      '      <Topology TopologyType="Polyvertex" NumberOfElements="'//str(ncontact)//'" NodesPerElement="1">', &
+      data_item(h5, 'contact_vertices', ncontact, 0, 'Int', 4), &
+      '      </Topology>', &
+      geometry(h5, 'contact_coordinates', ncontact), &
+      attribute(h5, 'contact_pressure', 'Scalar', 'Node', ncontact, 0, 'Float', 8), &
+      attribute(h5, 'contact_gap', 'Scalar', 'Node', ncontact, 0, 'Float', 8), &
+      '    </Grid>'
+  end subroutine write_grids
 
   !> The Geometry element (XYZ) from dataset /`name` of `rows` x 3.
   function geometry(h5, name, rows) result(lines)
