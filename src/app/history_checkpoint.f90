@@ -8,6 +8,7 @@
 !> than the other ranks' files; the caller agrees on the answer over ranks.
 module history_checkpoint
   use kinds, only: dp, ip, i8
+  use text, only: str
   implicit none
   private
 
@@ -114,7 +115,7 @@ contains
     else if (any(ck%fingerprint /= fingerprint)) then
       msg = 'checkpoint '//file//' belongs to another input or mesh (its fingerprint differs from this run''s)'
     else if (file_ranks /= nranks .or. file_rank /= rank) then
-      msg = 'checkpoint '//file//' was written by rank '//itoa(file_rank)//' of '//itoa(file_ranks)// &
+      msg = 'checkpoint '//file//' was written by rank '//str(file_rank)//' of '//str(file_ranks)// &
             ' ranks; restart on the same number of ranks'
     else if (nl /= n_lambda .or. nm /= n_mu .or. nr < 1 .or. ck%step < 1 .or. nr /= ck%step) then
       msg = 'checkpoint '//file//' has sizes that do not fit this run'
@@ -148,14 +149,6 @@ contains
     character(len=*), intent(in) :: base
     integer, intent(in) :: rank
     character(len=:), allocatable :: file
-    file = trim(base)//'.'//itoa(int(rank, ip))
+    file = trim(base)//'.'//str(int(rank, ip))
   end function rank_file
-
-  function itoa(v) result(s)
-    integer(ip), intent(in) :: v
-    character(len=:), allocatable :: s
-    character(len=16) :: buf
-    write (buf, '(i0)') v
-    s = trim(buf)
-  end function itoa
 end module history_checkpoint

@@ -11,6 +11,7 @@
 !> after the current step (its checkpoint written; `restart` continues).
 module load_history
   use kinds, only: dp, ip, i8, path_len, MPI_REAL_DP, MPI_INT_I8
+  use text, only: str
   use errors, only: exit_not_converged, exit_kkt_failed, exit_input_error, collective_error
   use logger, only: log_section, log_message
   use timers, only: timer_start, timer_stop, timers_reduce, timer_stat_t, timer_seconds
@@ -111,7 +112,7 @@ contains
         rec%step = step
         rec%factor = p%history%factor(step)
         rec%gap = p%history%gap(step, p%obstacle%gap)
-        call log_section('Step '//itoa(step))
+        call log_section('Step '//str(step))
         ! 1. the right-hand sides of the step
         call timer_start('step rhs')
         call dual%set_load(rec%factor, rec%gap - p%obstacle%gap)
@@ -502,12 +503,4 @@ contains
     call js%end_array()
     json = js%text()
   end function history_json
-
-  function itoa(v) result(s)
-    integer(ip), intent(in) :: v
-    character(len=:), allocatable :: s
-    character(len=16) :: buf
-    write (buf, '(i0)') v
-    s = trim(buf)
-  end function itoa
 end module load_history
