@@ -33,13 +33,15 @@ contains
     this%keys = 0
   end subroutine init
 
-  integer(ip) function slot_of(this, key)
+  !> The slot of key = i 2^31 + j: linear probing from (73856093 i + 19349663 j)
+  !> modulo the capacity (a power of two, so the modulo is a mask).
+  integer(ip) function slot_of(this, i, j, key)
     class(block_hash_t), intent(in) :: this
+    integer(ip), intent(in) :: i, j
     integer(i8), intent(in) :: key
     integer(i8) :: h
-    ! key = i*2^31 + j with i, j < 2^31: a mix of i and j that cannot overflow
-    h = (key/2147483648_i8)*73856093_i8 + mod(key, 2147483648_i8)*19349663_i8
-    slot_of = int(mod(h, int(this%capacity, i8)), ip) + 1
+    h = int(i, i8)*73856093_i8 + int(j, i8)*19349663_i8
+    slot_of = int(iand(h, int(this%capacity - 1, i8)), ip) + 1
     do while (this%keys(slot_of) /= 0 .and. this%keys(slot_of) /= key)
       slot_of = slot_of + 1
       if (slot_of > this%capacity) slot_of = 1
@@ -55,7 +57,7 @@ contains
     integer(ip) :: s
     if (2*(this%used + 1) > this%capacity) call grow(this)
     key = int(i, i8)*2147483648_i8 + j
-    s = slot_of(this, key)
+    s = slot_of(this, i, j, key)
     if (this%keys(s) == 0) then
       this%keys(s) = key
       this%bi(s) = i

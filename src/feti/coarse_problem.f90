@@ -56,7 +56,7 @@ module coarse_problem
                      MPI_Allgatherv, MPI_Isend, MPI_Irecv, MPI_Waitall, MPI_Request, MPI_STATUSES_IGNORE, &
                      MPI_INTEGER, MPI_INTEGER8, MPI_Allgather, MPI_Comm_split, &
                      MPI_Comm_free, MPI_COMM_NULL, MPI_UNDEFINED, MPI_IN_PLACE, &
-                     MPI_Comm_split_type, MPI_COMM_TYPE_SHARED, MPI_INFO_NULL, MPI_Allreduce, MPI_MIN, MPI_SUM, &
+                     MPI_Comm_split_type, MPI_COMM_TYPE_SHARED, MPI_INFO_NULL, MPI_Allreduce, MPI_MIN, MPI_MAX, MPI_SUM, &
                      operator(/=)
   implicit none
   private
@@ -535,7 +535,7 @@ contains
     comm = this%comm
     rank = this%rank
     ! 1. the 6-blocks of every row, by copy slot, summed at the owner (once per run)
-    call ensure_row_blocks(con)
+    call ensure_row_blocks(dec, con)
 
     ! 2. g_r g_r^T of every owned row into 6x6 blocks. The hash is sized by the blocks, not by the
     ! rows: a subdomain has at most 26 neighbours, so about 14 upper blocks (its diagonal one and
@@ -546,7 +546,7 @@ contains
       keep = .true.
       if (present(mask)) keep = mask(i)
       if (.not. (keep .or. full_pattern)) cycle
-      call row_blocks(dec, con, this%layout, i, nb, pos, blk)
+      call row_blocks(con, this%layout, i, nb, pos, blk)
       if (.not. keep) blk = 0
       if (this%schur%m > 0) then
         do j1 = 1, nb
@@ -647,68 +647,155 @@ contains
     end subroutine add_product
   end subroutine assemble
 
-  !> The nonzero 6-blocks of G^T of every owned row by copy slot, in `con`
-  !> (constraints_t g_row_*), unless they are there already: each rank
-  !> computes the blocks of its own subdomains, one neighbour scatter-add
-  !> sums them at the row's owner, and the blocks that are not zero are kept
-  !> (at most 8 copies of a node; a gluing row touches 2). G does not change
-  !> during a run, so every later coarse assembly (the faces of the polish,
-  !> the standard reconstruction) reads them instead of summing again.
+  !> The nonzero 6-blocks of G^T of every owned row with their subdomains, in
+  !> `con` (constraints_t g_row_*), unless they are there already. A row has
+  !> one B entry per subdomain copy it touches, so every block comes whole
+  !> from one rank: the blocks of owned rows are taken where they are, those
+  !> of ghost rows go to the row's owner in one neighbour exchange (only the
+  !> entries, not a slot per possible copy). Blocks are kept in copy-slot
+  !> order. G does not change during a run, so every later coarse assembly
+  !> (the faces of the polish, the standard reconstruction) reads them.
   !> Collective the first time.
-  subroutine ensure_row_blocks(con)
+  subroutine ensure_row_blocks(dec, con)
+    type(decomposition_t), intent(in) :: dec
     type(constraints_t), intent(inout) :: con
-    real(dp), allocatable :: slots_local(:, :), slots_own(:, :)
-    integer(ip) :: ls, e, i, j, k
+    integer, parameter :: width = 8               ! slot, subdomain id, the 6-block
+    integer(ip), allocatable :: count_local(:), fill(:)
+    real(dp), allocatable :: ghost(:, :), received(:, :)
+    integer(ip) :: ls, e, r, i, k, n_ghost, per_row, m
+    integer :: ierr
+
     if (con%g_rows_ready) return
-    allocate (slots_local(48, con%n_local), slots_own(48, con%n_own))
-    slots_local = 0
+    n_ghost = con%n_local - con%n_own
+    ! 1. entries per local row; the widest ghost row sets the exchange's width
+    allocate (count_local(con%n_local))
+    count_local = 0
     do ls = 1, size(con%b, kind=ip)
       associate (bs => con%b(ls))
         do e = 1, bs%nentries
-          i = 6*(bs%slot(e) - 1)
-          slots_local(i + 1:i + 6, bs%row(e)) = slots_local(i + 1:i + 6, bs%row(e)) + bs%g(:, e)
+          count_local(bs%row(e)) = count_local(bs%row(e)) + 1
         end do
       end associate
     end do
-    call con%exchange%scatter_add_multi(48, slots_local, slots_own)
-    deallocate (slots_local)
+    per_row = 0
+    if (n_ghost > 0) per_row = maxval(count_local(con%n_own + 1:))
+    call MPI_Allreduce(MPI_IN_PLACE, per_row, 1, MPI_INT_IP, MPI_MAX, con%exchange%graph_comm, ierr)
+    ! 2. ghost rows' entries to their owners (slot 0: unused place)
+    allocate (ghost(width*max(per_row, 1_ip), n_ghost))
+    ghost = 0
+    allocate (fill(con%n_local))
+    fill = 0
+    do ls = 1, size(con%b, kind=ip)
+      associate (bs => con%b(ls))
+        do e = 1, bs%nentries
+          r = bs%row(e)
+          if (r <= con%n_own) cycle
+          k = width*fill(r)
+          fill(r) = fill(r) + 1
+          ghost(k + 1, r - con%n_own) = bs%slot(e)
+          ghost(k + 2, r - con%n_own) = dec%local_subdomains(ls)
+          ghost(k + 3:k + 8, r - con%n_own) = bs%g(:, e)
+        end do
+      end associate
+    end do
+    call con%exchange%ghosts_to_owners(width*max(per_row, 1_ip), ghost, received)
+    deallocate (ghost)
+    ! 3. blocks per owned row: its own entries and the received ones
+    do k = 1, size(received, 2, kind=ip)
+      i = con%exchange%send_index(k)
+      do m = 0, per_row - 1
+        if (received(width*m + 1, k) > 0) count_local(i) = count_local(i) + 1
+      end do
+    end do
     allocate (con%g_row_first(con%n_own + 1))
-    k = 0
+    con%g_row_first(1) = 1
     do i = 1, con%n_own
-      con%g_row_first(i) = k + 1
-      do j = 1, 8
-        if (any(slots_own(6*j - 5:6*j, i) /= 0)) k = k + 1
+      con%g_row_first(i + 1) = con%g_row_first(i) + count_local(i)
+    end do
+    k = con%g_row_first(con%n_own + 1) - 1
+    allocate (con%g_row_slot(k), con%g_row_sub(k), con%g_row_block(6, k))
+    fill(1:con%n_own) = 0
+    do ls = 1, size(con%b, kind=ip)
+      associate (bs => con%b(ls))
+        do e = 1, bs%nentries
+          if (bs%row(e) <= con%n_own) &
+            call put(bs%row(e), bs%slot(e), dec%local_subdomains(ls), bs%g(:, e))
+        end do
+      end associate
+    end do
+    do k = 1, size(received, 2, kind=ip)
+      do m = 0, per_row - 1
+        if (received(width*m + 1, k) > 0) &
+          call put(con%exchange%send_index(k), nint(received(width*m + 1, k), ip), &
+                   nint(received(width*m + 2, k), ip), received(width*m + 3:width*m + 8, k))
       end do
     end do
-    con%g_row_first(con%n_own + 1) = k + 1
-    allocate (con%g_row_slot(k), con%g_row_block(6, k))
-    k = 0
-    do i = 1, con%n_own
-      do j = 1, 8
-        if (all(slots_own(6*j - 5:6*j, i) == 0)) cycle
-        k = k + 1
-        con%g_row_slot(k) = j
-        con%g_row_block(:, k) = slots_own(6*j - 5:6*j, i)
-      end do
-    end do
+    call drop_zero_blocks(con, fill)
     con%g_rows_ready = .true.
+
+  contains
+
+    !> Block (slot, sub, g) into owned row i, the row's blocks kept in slot order.
+    subroutine put(i, slot, sub, g)
+      integer(ip), intent(in) :: i, slot, sub
+      real(dp), intent(in) :: g(6)
+      integer(ip) :: first, j
+      first = con%g_row_first(i)
+      do j = first, first + fill(i) - 1
+        if (con%g_row_slot(j) == slot) then      ! a second entry of the same copy: summed
+          con%g_row_block(:, j) = con%g_row_block(:, j) + g
+          return
+        end if
+      end do
+      j = first + fill(i)
+      do while (j > first)
+        if (con%g_row_slot(j - 1) < slot) exit
+        con%g_row_slot(j) = con%g_row_slot(j - 1)
+        con%g_row_sub(j) = con%g_row_sub(j - 1)
+        con%g_row_block(:, j) = con%g_row_block(:, j - 1)
+        j = j - 1
+      end do
+      con%g_row_slot(j) = slot
+      con%g_row_sub(j) = sub
+      con%g_row_block(:, j) = g
+      fill(i) = fill(i) + 1
+    end subroutine put
   end subroutine ensure_row_blocks
+
+  !> Keeps of each owned row's filled blocks (`filled`) those that are not
+  !> exactly zero, compacting con's g_row_* lists.
+  subroutine drop_zero_blocks(con, filled)
+    type(constraints_t), intent(inout) :: con
+    integer(ip), intent(in) :: filled(:)
+    integer(ip) :: i, k, n, first
+    n = 0
+    do i = 1, con%n_own
+      first = con%g_row_first(i)
+      con%g_row_first(i) = n + 1
+      do k = first, first + filled(i) - 1
+        if (all(con%g_row_block(:, k) == 0)) cycle
+        n = n + 1
+        con%g_row_slot(n) = con%g_row_slot(k)
+        con%g_row_sub(n) = con%g_row_sub(k)
+        con%g_row_block(:, n) = con%g_row_block(:, k)
+      end do
+    end do
+    con%g_row_first(con%n_own + 1) = n + 1
+  end subroutine drop_zero_blocks
 
   !> The nonzero 6-blocks of owned row i of G^T and the coarse positions of
   !> their subdomains: blk(:, 1:nb), pos(1:nb) (ensure_row_blocks first).
-  subroutine row_blocks(dec, con, layout, i, nb, pos, blk)
-    type(decomposition_t), intent(in) :: dec
+  pure subroutine row_blocks(con, layout, i, nb, pos, blk)
     type(constraints_t), intent(in) :: con
     type(coarse_layout_t), intent(in) :: layout
     integer(ip), intent(in) :: i
     integer(ip), intent(out) :: nb, pos(8)
     real(dp), intent(out) :: blk(6, 8)
-    integer(ip) :: copies(8), ncopies, k
-    call dec%node_subdomain_list(con%node(i), copies, ncopies)
+    integer(ip) :: k
     nb = 0
     do k = con%g_row_first(i), con%g_row_first(i + 1) - 1
       nb = nb + 1
-      pos(nb) = layout%position(copies(con%g_row_slot(k)))
+      pos(nb) = layout%position(con%g_row_sub(k))
       blk(:, nb) = con%g_row_block(:, k)
     end do
   end subroutine row_blocks

@@ -102,14 +102,16 @@ module constraints
     integer(ip), allocatable :: row_node(:)   !< (n_own) local node number in that subdomain
     type(subdomain_rows_t), allocatable :: b(:)  !< (number of local subdomains)
     type(dual_exchange_t) :: exchange
-    !> The nonzero 6-blocks of G^T of every owned row, summed at the owner, by
-    !> copy slot (the position of the subdomain in the node's copy list):
+    !> The nonzero 6-blocks of G^T of every owned row, gathered at the owner:
     !> blocks g_row_first(i) .. g_row_first(i+1)-1 of row i, g_row_block(:, k)
-    !> on copy g_row_slot(k). Filled once by coarse_problem::ensure_row_blocks
-    !> (G does not change during a run) and read by every coarse assembly.
+    !> of subdomain g_row_sub(k) on copy g_row_slot(k) (the position of the
+    !> subdomain in the node's copy list; blocks in slot order). Filled once by
+    !> coarse_problem::ensure_row_blocks (G does not change during a run) and
+    !> read by every coarse assembly.
     logical :: g_rows_ready = .false.
     integer(ip), allocatable :: g_row_first(:)    !< (n_own + 1)
     integer(ip), allocatable :: g_row_slot(:)     !< (blocks) 1..8
+    integer(ip), allocatable :: g_row_sub(:)      !< (blocks) subdomain id
     real(dp), allocatable :: g_row_block(:, :)    !< (6, blocks)
   end type constraints_t
 

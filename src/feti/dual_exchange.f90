@@ -34,6 +34,7 @@ module dual_exchange
     procedure :: gather
     procedure :: scatter_add
     procedure :: scatter_add_multi
+    procedure :: ghosts_to_owners
     procedure :: free
   end type dual_exchange_t
 
@@ -116,6 +117,27 @@ contains
       own(this%send_index(i)) = own(this%send_index(i)) + this%send_buffer(i)
     end do
   end subroutine scatter_add
+
+  !> The ncomp values every ghost entry holds here (`ghost(:, i)` for local
+  !> entry n_own + i) to the entry's owner, unsummed: received(:, k) is a
+  !> neighbour's value for owned entry send_index(k) (an entry that several
+  !> neighbours hold comes once from each). For set-up only.
+  subroutine ghosts_to_owners(this, ncomp, ghost, received)
+    class(dual_exchange_t), intent(inout) :: this
+    integer, intent(in) :: ncomp
+    real(dp), intent(in) :: ghost(:, :)
+    real(dp), allocatable, intent(out) :: received(:, :)
+    real(dp), allocatable :: sbuf(:, :)
+    integer :: i, ierr
+
+    allocate (sbuf(ncomp, max(1, size(this%recv_index))), received(ncomp, size(this%send_index)))
+    do i = 1, size(this%recv_index)
+      sbuf(:, i) = ghost(:, this%recv_index(i) - this%n_own)
+    end do
+    call MPI_Neighbor_alltoallv(sbuf, ncomp*this%recv_counts, ncomp*this%recv_displs, MPI_REAL_DP, &
+                                received, ncomp*this%send_counts, ncomp*this%send_displs, MPI_REAL_DP, &
+                                this%graph_comm, ierr)
+  end subroutine ghosts_to_owners
 
   !> `scatter_add` of ncomp values per entry. For set-up only.
   subroutine scatter_add_multi(this, ncomp, local, own)

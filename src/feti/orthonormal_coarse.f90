@@ -132,13 +132,13 @@ contains
 
     ! 1. the 6-blocks of every row, by copy slot, summed at the row's owner
     t0 = MPI_Wtime()
-    call ensure_row_blocks(con)
+    call ensure_row_blocks(dec, con)
 
     ! 2. G G^T = sum over rows of g_r g_r^T, dense; first block of every column
     allocate (this%l(this%n, this%n), first(this%n_own))
     this%l = 0
     do i = 1, this%n_own
-      call row_blocks(dec, con, layout, i, nb, pos, blk)
+      call row_blocks(con, layout, i, nb, pos, blk)
       first(i) = this%nsub
       if (nb > 0) first(i) = minval(pos(1:nb))
       do b = 1, nb
@@ -201,7 +201,7 @@ contains
       this%column_row(this%group_col(g) + kk) = i
       r0 = this%group_row(g)
       h = this%n - r0 + 1
-      call row_blocks(dec, con, layout, i, nb, pos, blk)
+      call row_blocks(con, layout, i, nb, pos, blk)
       do a = 1, nb
         this%values(this%group_offset(g) + int(kk, i8)*h + 6*pos(a) - 5 - r0 + 1: &
                     this%group_offset(g) + int(kk, i8)*h + 6*pos(a) - r0 + 1) = blk(:, a)
