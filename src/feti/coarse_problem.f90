@@ -801,9 +801,11 @@ contains
   end subroutine row_blocks
 
   !> Fill-reducing pivot order of G G^T (perm(dof) = position, MUMPS PERM_IN):
-  !> METIS nested dissection of the subdomain adjacency graph (subdomains
-  !> sharing a node), which is the block pattern of G G^T, each subdomain's 6
-  !> rows kept together. Every rank computes the same order.
+  !> nested dissection of the subdomain adjacency graph (subdomains sharing a
+  !> node), which is the block pattern of G G^T, each subdomain's 6 rows kept
+  !> together: by planes for box subdomains (box_nested_dissection; 6% fewer
+  !> factor entries and flops than METIS's at 4096 subdomains, docs/TUNING.md),
+  !> else by METIS. Every rank computes the same order.
   function coarse_ordering(dec, layout) result(perm)
     type(decomposition_t), intent(in) :: dec
     type(coarse_layout_t), intent(in) :: layout
@@ -827,13 +829,60 @@ contains
       end do
       pxadj(p + 1) = q + 1
     end do
-    call metis_node_nd(n, pxadj, padj(1:q), order, position)
+    if (dec%is_box()) then
+      call box_nested_dissection(dec%mesh%nsub, layout, position)
+    else
+      call metis_node_nd(n, pxadj, padj(1:q), order, position)
+    end if
     do p = 1, n
       do k = 1, 6
         perm(6*(p - 1) + k) = 6*(position(p) - 1) + k
       end do
     end do
   end function coarse_ordering
+
+  !> Nested dissection of the box grid of subdomains by planes: a box of the
+  !> grid is split at the middle plane of its longest side (with 26 neighbours
+  !> one plane of subdomains separates the halves); the halves come first, the
+  !> plane last. position(p): elimination place of coarse position p.
+  subroutine box_nested_dissection(nsub, layout, position)
+    integer(ip), intent(in) :: nsub(3)
+    type(coarse_layout_t), intent(in) :: layout
+    integer(ip), intent(out) :: position(:)
+    integer(ip) :: next
+    next = 0
+    call dissect([0_ip, 0_ip, 0_ip], nsub - 1)
+  contains
+    recursive subroutine dissect(lo, hi)
+      integer(ip), intent(in) :: lo(3), hi(3)
+      integer(ip) :: d, m, i, j, k, mlo(3), mhi(3)
+      if (any(hi < lo)) return
+      d = maxloc(hi - lo, 1)
+      if (hi(d) - lo(d) < 2) then
+        do k = lo(3), hi(3)
+          do j = lo(2), hi(2)
+            do i = lo(1), hi(1)
+              next = next + 1
+              position(layout%position(1 + i + nsub(1)*(j + nsub(2)*k))) = next
+            end do
+          end do
+        end do
+        return
+      end if
+      m = (lo(d) + hi(d))/2
+      mhi = hi
+      mhi(d) = m - 1
+      call dissect(lo, mhi)
+      mlo = lo
+      mlo(d) = m + 1
+      call dissect(mlo, hi)
+      mlo = lo
+      mhi = hi
+      mlo(d) = m
+      mhi(d) = m
+      call dissect(mlo, mhi)
+    end subroutine dissect
+  end subroutine box_nested_dissection
 
   !> x = A^{-1} b for local coarse blocks b (6*nlocal), A the factorized
   !> matrix, or with a low-rank update (set_update) A + V V^T by Woodbury's
