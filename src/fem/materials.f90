@@ -109,7 +109,7 @@ contains
     case ('none')
       young = material%young
     case ('checkerboard')
-      if (dec%method == 'box') then
+      if (dec%is_box()) then
         r = id - 1
         ijk(1) = mod(r, dec%mesh%nsub(1))
         r = r/dec%mesh%nsub(1)

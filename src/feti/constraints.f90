@@ -147,12 +147,14 @@ contains
     integer :: ierr, rank
     logical :: filling
     integer(ip) :: cslot   ! visit -> emit: the unit's position in the node's unit list
+    real(dp), allocatable :: sub_weight(:)   ! w of every subdomain (copy_weights)
 
     con%comm = comm
     call MPI_Comm_rank(comm, rank, ierr)
     me = rank
 
     ! 1. Records of every B entry of the local subdomains (count, then fill).
+    call subdomain_weights()
     nrec = 0
     call visit(.false.)
     allocate (rec(nrec))
@@ -246,19 +248,26 @@ contains
     end subroutine visit
 
     !> w_c = E(s_c)/young for the copies' subdomains with &solver scaling =
-    !> 'young', else 1. From the parameters alone: the same on every rank.
+    !> 'young', else 1 (sub_weight).
     subroutine copy_weights(ids, w)
       integer(ip), intent(in) :: ids(:)
       real(dp), intent(out) :: w(:)
-      integer(ip) :: c
-      real(dp) :: young, nu
-      w = 1
-      if (settings%scaling%scaling /= 'young') return
-      do c = 1, size(ids, kind=ip)
-        call subdomain_material(settings%material, dec, ids(c), young, nu)
-        w(c) = young/settings%material%young
-      end do
+      w = sub_weight(ids)
     end subroutine copy_weights
+
+    !> sub_weight(s) = E(s)/young for every subdomain with &solver scaling = 'young', else 1.
+    !> From the parameters alone: the same on every rank.
+    subroutine subdomain_weights()
+      integer(ip) :: s
+      real(dp) :: young, nu
+      allocate (sub_weight(dec%nsubdomains))
+      sub_weight = 1
+      if (settings%scaling%scaling /= 'young') return
+      do s = 1, dec%nsubdomains
+        call subdomain_material(settings%material, dec, s, young, nu)
+        sub_weight(s) = young/settings%material%young
+      end do
+    end subroutine subdomain_weights
 
     subroutine emit(key, owner, ls, dof, node, gid, kind, slot, val, c, scale, unit)
       integer(i8), intent(in) :: key

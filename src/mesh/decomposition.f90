@@ -57,6 +57,7 @@ module decomposition
     type(box_mesh_t) :: mesh
     type(MPI_Comm) :: comm                              !< the ranks that share the subdomains
     character(len=name_len) :: method = 'box'           !< 'box' | 'metis'
+    logical :: box = .true.                             !< method == 'box' (is_box, in the inner loops)
     integer(ip) :: nsubdomains = 0, nranks = 1, rank = 0
     !> 'metis' only: block size b (elements per block edge), blocks per
     !> direction, and the subdomain of every block (box: subdomain_of_element
@@ -99,6 +100,7 @@ contains
     dec%rank = rank
     dec%nranks = nranks
     dec%method = m%decomposition
+    dec%box = trim(m%decomposition) == 'box'
     call box_mesh_init(dec%mesh, m%nsub, m%nel, m%lengths, m%distortion, &
                        m%distortion_seed)
 
@@ -608,7 +610,7 @@ contains
   !> True for a box decomposition (index arithmetic, no global arrays).
   pure logical function is_box(this)
     class(decomposition_t), intent(in) :: this
-    is_box = trim(this%method) == 'box'
+    is_box = this%box
   end function is_box
 
   !> Id of the subdomain holding element `gid`, by index arithmetic (METIS:
