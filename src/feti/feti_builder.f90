@@ -66,9 +66,9 @@ contains
         trim(this%ordering_used), ' (largest subdomain ', largest, ' dofs)'
       call log_message(trim(line))
     end block
-    ! hybrid TFETI keeps the per-unit K^+ (sharing between clusters is not measured yet)
+    ! congruent clusters share K^+ like congruent subdomains (docs/TUNING.md "Clusters")
     call this%f%init(this%subs, this%solver_used, settings%local%regularization, this%ordering_used, &
-                     int(mydofs, ip), share=merge('none', settings%local%share_subdomains(1:4), this%hybrid))
+                     int(mydofs, ip), share=settings%local%share_subdomains(1:4))
     block
       character(len=160) :: line
       write (line, '(a,i0,a,i0,a)') 'local subdomains: ', this%n_local_subs, ' in ', this%f%n_classes(), &
@@ -256,12 +256,13 @@ contains
     logical :: use_explicit
     real(dp) :: ratio, fl(3)
     character(len=240) :: line
-    if (this%hybrid .and. settings%f_action%f_action == 'auto') then
-      call log_message('F action: implicit (K^+ solves; hybrid TFETI)')
-      return
-    end if
     sharing = merge(1, 0, this%f%is_shared())
     call MPI_Allreduce(MPI_IN_PLACE, sharing, 1, MPI_INTEGER, MPI_MIN, this%communicator, ierr)
+    ! hybrid TFETI: explicit operators only shared per class of congruent clusters
+    if (this%hybrid .and. settings%f_action%f_action == 'auto' .and. sharing == 0) then
+      call log_message('F action: implicit (K^+ solves; hybrid TFETI without congruent clusters)')
+      return
+    end if
     select case (settings%f_action%f_action)
     case ('explicit')
       use_explicit = .true.

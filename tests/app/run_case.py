@@ -4,6 +4,7 @@
     run_case.py --program feticontact --mpiexec mpiexec --ranks 2 --input inputs/block.nml \
         --workdir DIR [--set group:variable=value ...] [--expect-exit N] [--expect-message REGEX] \
         [--check block_exact:TOL] [--check report] [--check xdmf] [--check same_as:DIR:TOL]
+        [--check f_action:explicit_shared|explicit|implicit]
         [--check alpha_agree:TOL] [--check switch:yes|no[:seen]] [--check same_switch_as:DIR]
         [--switch-threshold DIR:inside|above]
 
@@ -480,6 +481,14 @@ def check_cluster(outdir, groups, expect):
         check(c == [1, 1, 1], "automatic choice plain TFETI (cluster %s)" % c)
 
 
+def check_f_action(outdir, expected):
+    """report.json's F action is `expected` ('explicit_shared', 'explicit' or 'implicit')."""
+    with open(os.path.join(outdir, "report.json")) as f:
+        perf = json.load(f)["performance"]
+    got = perf["f_action"] + ("_shared" if perf["f_action"] == "explicit" and perf["f_shared"] else "")
+    check(got == expected, "F action %s (expected %s)" % (got, expected))
+
+
 def check_alpha_agree(outdir, tol):
     """&reconstruction method = 'both': the new (Eq. 24) and the standard (Eq. 10) alpha agree."""
     with open(os.path.join(outdir, "report.json")) as f:
@@ -616,6 +625,8 @@ def main():
             check_hertz(outdir, groups)
         elif kind == "cluster":
             check_cluster(outdir, groups, rest[0])
+        elif kind == "f_action":
+            check_f_action(outdir, rest[0])
         elif kind == "alpha_agree":
             check_alpha_agree(outdir, float(rest[0]))
         elif kind == "same_as":
