@@ -120,6 +120,9 @@ contains
         ! 2. the solve, warm started (warm_guess; nu = P lambda0, P lambda~ = 0, which SMALBE projects
         ! onto nu >= -lambda~)
         call solver%init(p%solver%smalbe, dual%hessian_norm())
+        ! warm: the face CG directions of the earlier steps start this step's face solves (F is the
+        ! same in every step; face_recycle)
+        solver%polish%face%recycle%on = p%history%warm_start
         nu = 0
         if (warm%n > 0 .and. p%history%warm_start) then
           call warm_guess(warm, rec%factor, rec%gap, work, muhat0, rec%warm)
