@@ -3,20 +3,23 @@
 !> right-hand sides). The directions p_j of earlier face CG runs are kept
 !> with their images q_j = A p_j (plus a vector C^T c_j of the range of C^T
 !> with a lazy face operator), W = [p_j], Q = [q_j], and the Gram matrix
-!> W^T Q = W^T A W (the range terms drop out: C p = 0). A p_j vanishes on
-!> the active rows of its run and has C p_j = 0, so it is a vector of every
-!> face whose free rows contain those of its run (`usable`). On such a face:
+!> W^T Q = W^T A W (the range terms drop out: C p_j = 0). A p_j vanishes on
+!> the rows that were active in its run. A new run on the face of `free`
+!> (`begin_run`) whose free rows contain those of the kept pairs' runs (so
+!> each p_j is a vector of its face; otherwise, a contact zone that shrinks,
+!> the store is emptied first):
 !> - the Galerkin start x <- x + W a, (W^T A W) a = W^T r (r = -P_F g), costs
 !>   no Hessian product (g <- g + Q a) and makes r orthogonal to span W;
 !> - deflated CG: each preconditioned residual z loses its A-projection onto
-!>   span W, z <- z - W (W^T A W)^{-1} Q^T z, so the CG directions stay
-!>   A-orthogonal to W and r stays orthogonal to it; CG then works on the
-!>   A-complement of the kept space (Saad, Yeung, Erhel, Guyomarc'h, SIAM J.
-!>   Sci. Comput. 21, 2000).
+!>   span W, z <- z - W (W^T A W)^{-1} Q^T z, so the new directions stay
+!>   A-orthogonal to W and r orthogonal to it: CG works on the A-complement
+!>   of the kept space (Saad, Yeung, Erhel, Guyomarc'h, SIAM J. Sci. Comput.
+!>   21, 2000), where the modes the earlier runs resolved are gone.
 !> The solution is that of the face problem either way: only the start and
-!> the search space change. At most `capacity` pairs, the oldest replaced
-!> first; a run on a face that does not contain the kept free rows (a
-!> shrinking contact zone) empties the store first. Every routine that
+!> the search space change. The run's own directions are added after the
+!> kept ones (the deflation basis of a run is the set kept at its start); at
+!> most `recycle_capacity` pairs, the oldest dropped first, with room for
+!> `recycle_reserve` new ones at the start of each run. Every routine that
 !> takes the problem is collective.
 module face_recycle
   use kinds, only: dp, ip
@@ -26,24 +29,26 @@ module face_recycle
   private
 
   !> pairs kept at most (memory: 2 capacity vectors of the local length)
-  integer(ip), parameter, public :: recycle_capacity = 40
+  integer(ip), parameter, public :: recycle_capacity = 48
+  !> room made for the pairs of a new run (the oldest dropped)
+  integer(ip), parameter, public :: recycle_reserve = 24
 
   type, public :: face_recycle_t
     logical :: on = .false.                     !< keep directions and use them (the caller's choice)
-    integer(ip) :: k = 0                        !< pairs kept
-    integer(ip) :: next = 1                     !< the slot the next pair goes to (1..capacity)
-    integer(ip) :: n_used = 0                   !< pairs the last `start` used (0: none)
+    integer(ip) :: k = 0                        !< pairs kept (columns 1..k, oldest first)
+    integer(ip) :: n_used = 0                   !< pairs the current (last) run started from (its deflation basis)
     real(dp), allocatable :: w(:, :), q(:, :)   !< p_j and q_j (local rows, capacity columns)
-    real(dp), allocatable :: gram(:, :)         !< W^T Q over the kept slots
+    real(dp), allocatable :: gram(:, :)         !< W^T Q over the kept columns
     logical, allocatable :: free(:)             !< union of the free rows of the kept pairs' runs
     real(dp), allocatable, private :: chol(:, :), c(:)
-    logical, private :: ready = .false.         !< chol holds the Cholesky factor of gram
   contains
     procedure :: clear
-    procedure :: usable
+    procedure :: begin_run
     procedure :: start
     procedure :: deflate
     procedure :: add
+    procedure :: write_state
+    procedure :: read_state
   end type face_recycle_t
 
 contains
@@ -52,32 +57,35 @@ contains
   subroutine clear(self)
     class(face_recycle_t), intent(inout) :: self
     self%k = 0
-    self%next = 1
     self%n_used = 0
-    self%ready = .false.
     if (allocated(self%free)) self%free = .false.
   end subroutine clear
 
-  !> The kept pairs are vectors of the face of `free` (their free rows are
-  !> free there); otherwise the store is emptied. False without pairs.
-  logical function usable(self, problem, free)
+  !> Before a run on the face of `free`: the kept pairs restricted to that
+  !> face (the module), room for the run's own pairs, the Cholesky factor of
+  !> their Gram matrix. True when the run starts from n_used > 0 pairs.
+  logical function begin_run(self, problem, free) result(usable)
     class(face_recycle_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
     logical, intent(in) :: free(:)
-    integer :: ierr
     usable = .false.
     self%n_used = 0
     if (.not. self%on) return
     call ensure_store(self, problem%n)
+    if (self%k > 0) call restrict(self, problem, free)
+    if (self%k > recycle_capacity - recycle_reserve) call drop_oldest(self, self%k - (recycle_capacity - recycle_reserve))
+    self%free(1:problem%n) = self%free(1:problem%n) .and. free(1:problem%n)
     if (self%k == 0) return
-    usable = .not. any(self%free(1:problem%n) .and. .not. free(1:problem%n))
-    call MPI_Allreduce(MPI_IN_PLACE, usable, 1, MPI_LOGICAL, MPI_LAND, problem%comm, ierr)
-    if (usable) usable = factor(self)
-    if (.not. usable) call self%clear()
-  end function usable
+    usable = factor(self)
+    if (.not. usable) then
+      call self%clear()
+      return
+    end if
+    self%n_used = self%k
+  end function begin_run
 
-  !> The Galerkin start on a face where the store is usable: a with
-  !> (W^T A W) a = W^T r, x <- x + W a, g <- g + Q a. No Hessian product.
+  !> The Galerkin start over the run's basis: a with (W^T A W) a = W^T r,
+  !> x <- x + W a, g <- g + Q a. No Hessian product.
   subroutine start(self, problem, x, g, r)
     class(face_recycle_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
@@ -87,54 +95,82 @@ contains
     n = problem%n
     call projections(self, problem, self%w, r, self%c)
     call solve_gram(self, self%c)
-    do j = 1, self%k
+    do j = 1, self%n_used
       x(1:n) = x(1:n) + self%c(j)*self%w(1:n, j)
       g(1:n) = g(1:n) + self%c(j)*self%q(1:n, j)
     end do
-    self%n_used = self%k
   end subroutine start
 
-  !> z <- z - W (W^T A W)^{-1} Q^T z (z a vector of the face, C z = 0).
+  !> z <- z - W (W^T A W)^{-1} Q^T z over the run's basis (z a vector of
+  !> the face, C z = 0); nothing without one.
   subroutine deflate(self, problem, z)
     class(face_recycle_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
     real(dp), intent(inout) :: z(:)
     integer(ip) :: j, n
+    if (self%n_used == 0) return
     n = problem%n
     call projections(self, problem, self%q, z, self%c)
     call solve_gram(self, self%c)
-    do j = 1, self%k
+    do j = 1, self%n_used
       z(1:n) = z(1:n) - self%c(j)*self%w(1:n, j)
     end do
   end subroutine deflate
 
   !> Keep the direction p of a CG step on the face of `free` and q, its
-  !> image by the face operator (the oldest pair makes room when full).
+  !> image by the face operator (while there is room).
   subroutine add(self, problem, free, p, q)
     class(face_recycle_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
     logical, intent(in) :: free(:)
     real(dp), intent(in) :: p(:), q(:)
-    integer(ip) :: j, s, n
+    integer(ip) :: s, n, nu
     if (.not. self%on) return
     n = problem%n
     call ensure_store(self, n)
-    s = self%next
+    if (self%k >= recycle_capacity) return
+    s = self%k + 1
     self%w(1:n, s) = p(1:n)
     self%q(1:n, s) = q(1:n)
-    self%k = max(self%k, s)
-    self%next = mod(s, recycle_capacity) + 1
     self%free(1:n) = self%free(1:n) .or. free(1:n)
-    ! the new row and column of the Gram matrix: w_j^T q_s (= p_j^T A p_s)
+    ! the new row and column of the Gram matrix: w_j^T q_s (= p_j^T A p_s); projections and
+    ! solve_gram work on the first n_used columns, so count s in for the dot products only
+    nu = self%n_used
+    self%n_used = s
     call projections(self, problem, self%w, self%q(:, s), self%c)
-    do j = 1, self%k
-      self%gram(j, s) = self%c(j)
-      self%gram(s, j) = self%c(j)
-    end do
-    self%ready = .false.
+    self%n_used = nu
+    self%gram(1:s, s) = self%c(1:s)
+    self%gram(s, 1:s) = self%c(1:s)
+    self%k = s
   end subroutine add
 
-  !> c(j) = v_j^T y for the kept columns v_j of `v` (global, compensated sums).
+  !> Empty the store when some kept free rows are active on the face of
+  !> `free` (a contact zone that shrinks: the kept directions are not vectors
+  !> of that face). Collective.
+  subroutine restrict(self, problem, free)
+    class(face_recycle_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    logical, intent(in) :: free(:)
+    logical :: inside
+    integer :: ierr
+    inside = .not. any(self%free(1:problem%n) .and. .not. free(1:problem%n))
+    call MPI_Allreduce(MPI_IN_PLACE, inside, 1, MPI_LOGICAL, MPI_LAND, problem%comm, ierr)
+    if (.not. inside) call self%clear()
+  end subroutine restrict
+
+  !> Drop the `m` oldest pairs.
+  subroutine drop_oldest(self, m)
+    class(face_recycle_t), intent(inout) :: self
+    integer(ip), intent(in) :: m
+    integer(ip) :: k
+    k = self%k - m
+    self%w(:, 1:k) = self%w(:, m + 1:self%k)
+    self%q(:, 1:k) = self%q(:, m + 1:self%k)
+    self%gram(1:k, 1:k) = self%gram(m + 1:self%k, m + 1:self%k)
+    self%k = k
+  end subroutine drop_oldest
+
+  !> c(j) = v_j^T y for the columns 1..n_used of `v` (global, compensated sums).
   subroutine projections(self, problem, v, y, c)
     class(face_recycle_t), intent(in) :: self
     class(qp_problem_t), intent(inout) :: problem
@@ -142,8 +178,8 @@ contains
     real(dp), intent(out) :: c(:)
     real(dp) :: hi(max_reduce_sums), lo(max_reduce_sums), s(max_reduce_sums)
     integer(ip) :: j0, j, m, i
-    do j0 = 1, self%k, max_reduce_sums
-      m = min(int(max_reduce_sums, ip), self%k - j0 + 1)
+    do j0 = 1, self%n_used, max_reduce_sums
+      m = min(int(max_reduce_sums, ip), self%n_used - j0 + 1)
       hi = 0
       lo = 0
       do j = 1, m
@@ -156,43 +192,104 @@ contains
     end do
   end subroutine projections
 
-  !> The Cholesky factor of the Gram matrix; false (not positive definite
-  !> to round-off: nearly dependent pairs) when it fails. The same on every
-  !> rank (the Gram matrix is).
+  !> The Cholesky factor of the Gram matrix of the k kept pairs; a pair
+  !> whose A-orthogonal part (to the pairs before it) has less than
+  !> `dependent` times its energy is dropped first (nearly dependent pairs
+  !> would make the Galerkin coefficients round-off). False when no pair
+  !> is left. The same on every rank (the Gram matrix is).
   logical function factor(self) result(ok)
     class(face_recycle_t), intent(inout) :: self
-    integer(ip) :: i, j, k
+    real(dp), parameter :: dependent = 1.0e-8_dp
+    integer(ip) :: i, j
     real(dp) :: d
-    ok = .true.
-    if (self%ready) return
-    k = self%k
-    self%chol(1:k, 1:k) = self%gram(1:k, 1:k)
-    do j = 1, k
-      d = self%chol(j, j) - sum(self%chol(j, 1:j - 1)**2)
-      if (.not. d > 1.0e-14_dp*abs(self%gram(j, j))) then
-        ok = .false.
-        return
-      end if
-      self%chol(j, j) = sqrt(d)
-      do i = j + 1, k
-        self%chol(i, j) = (self%chol(i, j) - sum(self%chol(i, 1:j - 1)*self%chol(j, 1:j - 1)))/self%chol(j, j)
+    j = 1
+    do while (j <= self%k)
+      self%chol(j, 1:j) = self%gram(j, 1:j)
+      do i = 1, j - 1
+        self%chol(j, i) = (self%chol(j, i) - sum(self%chol(j, 1:i - 1)*self%chol(i, 1:i - 1)))/self%chol(i, i)
       end do
+      d = self%gram(j, j) - sum(self%chol(j, 1:j - 1)**2)
+      if (d > dependent*abs(self%gram(j, j))) then
+        self%chol(j, j) = sqrt(d)
+        j = j + 1
+      else
+        call drop_column(self, j)
+      end if
     end do
-    self%ready = .true.
+    ok = self%k > 0
   end function factor
 
-  !> c <- (W^T A W)^{-1} c by the Cholesky factor (L L^T).
+  !> Remove pair j (the later ones move up).
+  subroutine drop_column(self, j)
+    class(face_recycle_t), intent(inout) :: self
+    integer(ip), intent(in) :: j
+    integer(ip) :: k
+    k = self%k
+    self%w(:, j:k - 1) = self%w(:, j + 1:k)
+    self%q(:, j:k - 1) = self%q(:, j + 1:k)
+    self%gram(j:k - 1, 1:k) = self%gram(j + 1:k, 1:k)
+    self%gram(1:k - 1, j:k - 1) = self%gram(1:k - 1, j + 1:k)
+    self%k = k - 1
+  end subroutine drop_column
+
+  !> c <- (W^T A W)^{-1} c over the run's basis (the Cholesky factor L L^T).
   subroutine solve_gram(self, c)
     class(face_recycle_t), intent(in) :: self
     real(dp), intent(inout) :: c(:)
-    integer(ip) :: j
-    do j = 1, self%k
+    integer(ip) :: j, k
+    k = self%n_used
+    do j = 1, k
       c(j) = (c(j) - sum(self%chol(j, 1:j - 1)*c(1:j - 1)))/self%chol(j, j)
     end do
-    do j = self%k, 1, -1
-      c(j) = (c(j) - sum(self%chol(j + 1:self%k, j)*c(j + 1:self%k)))/self%chol(j, j)
+    do j = k, 1, -1
+      c(j) = (c(j) - sum(self%chol(j + 1:k, j)*c(j + 1:k)))/self%chol(j, j)
     end do
   end subroutine solve_gram
+
+  !> The kept pairs to the open unformatted stream unit `u` (a checkpoint:
+  !> a restarted history starts its face solves as the uninterrupted one).
+  subroutine write_state(self, u, status, msg)
+    class(face_recycle_t), intent(in) :: self
+    integer, intent(in) :: u
+    integer, intent(out) :: status
+    character(len=*), intent(inout) :: msg
+    integer(ip) :: k
+    k = self%k
+    write (u, iostat=status, iomsg=msg) k
+    if (status /= 0 .or. k == 0) return
+    write (u, iostat=status, iomsg=msg) size(self%w, 1, kind=ip), self%w(:, 1:k), self%q(:, 1:k), &
+      self%gram(1:k, 1:k), merge(1_ip, 0_ip, self%free)
+  end subroutine write_state
+
+  !> The pairs of write_state from unit `u` for n local rows; status /= 0
+  !> when unreadable or of other sizes.
+  subroutine read_state(self, u, n, status)
+    class(face_recycle_t), intent(inout) :: self
+    integer, intent(in) :: u
+    integer(ip), intent(in) :: n
+    integer, intent(out) :: status
+    integer(ip) :: k, rows
+    integer(ip), allocatable :: flags(:)
+    call ensure_store(self, n)
+    call self%clear()
+    read (u, iostat=status) k
+    if (status /= 0) return
+    status = 1
+    if (k < 0 .or. k > recycle_capacity) return
+    status = 0
+    if (k == 0) return
+    allocate (flags(n))
+    read (u, iostat=status) rows
+    if (status /= 0) return
+    if (rows /= n) then
+      status = 1
+      return
+    end if
+    read (u, iostat=status) self%w(:, 1:k), self%q(:, 1:k), self%gram(1:k, 1:k), flags
+    if (status /= 0) return
+    self%free = flags == 1
+    self%k = k
+  end subroutine read_state
 
   !> The arrays for n local rows (emptied when n changes).
   subroutine ensure_store(self, n)
@@ -207,7 +304,6 @@ contains
               self%c(recycle_capacity), self%free(n))
     self%free = .false.
     self%k = 0
-    self%next = 1
-    self%ready = .false.
+    self%n_used = 0
   end subroutine ensure_store
 end module face_recycle

@@ -235,8 +235,8 @@ contains
       call ensure_size(self%g0, n)
       self%g0(1:n) = g(1:n)
     end if
-    ! the directions of earlier runs (face_recycle): the Galerkin start, no product
-    if (self%recycle%usable(problem, free)) then
+    ! the directions of earlier runs (face_recycle): the Galerkin start (no product), then deflated CG
+    if (self%recycle%begin_run(problem, free)) then
       call self%recycle%start(problem, x, g, self%r)
       unfolded = 1
       call face_project(problem, free, g, self%r, muhat)
@@ -249,6 +249,7 @@ contains
     check = loose_at > target
     if (.not. self%reached) then
       call precondition(self, problem, free, prec)
+      call self%recycle%deflate(problem, self%z)
       self%p = self%z
       rz = problem%dot(self%r, self%z)
       call self%ritz%begin_run()
@@ -294,6 +295,7 @@ contains
         if (prec .and. problem%watches_condition()) &
           call problem%condition_estimate(max(self%ritz%max_ratio, self%ritz%current_ratio()), switched)
         call precondition(self, problem, free, prec)
+        call self%recycle%deflate(problem, self%z)
         rz_new = problem%dot(self%r, self%z)
         if (switched) then
           self%p = self%z
