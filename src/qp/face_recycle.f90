@@ -18,25 +18,27 @@
 !> The solution is that of the face problem either way: only the start and
 !> the search space change. The run's own directions are added after the
 !> kept ones (the deflation basis of a run is the set kept at its start); at
-!> most `recycle_capacity` pairs, the oldest dropped first, with room for
-!> `recycle_reserve` new ones at the start of each run. Every routine that
-!> takes the problem is collective.
+!> most `capacity` pairs (recycle_pairs, fewer on large problems:
+!> recycle_bytes per rank), the oldest dropped first, the kept ones at most
+!> two thirds of them at the start of a run. Every routine that takes the
+!> problem is collective.
 module face_recycle
-  use kinds, only: dp, ip
+  use kinds, only: dp, ip, MPI_INT_IP
   use qp_problem, only: qp_problem_t, compensated_add, max_reduce_sums
-  use mpi_f08, only: MPI_Allreduce, MPI_IN_PLACE, MPI_LAND, MPI_LOGICAL
+  use mpi_f08, only: MPI_Allreduce, MPI_IN_PLACE, MPI_LAND, MPI_LOGICAL, MPI_MAX
   implicit none
   private
 
-  !> pairs kept at most (memory: 2 capacity vectors of the local length)
-  integer(ip), parameter, public :: recycle_capacity = 48
-  !> room made for the pairs of a new run (the oldest dropped)
-  integer(ip), parameter, public :: recycle_reserve = 24
+  !> pairs kept at most: recycle_pairs, fewer where their 2 vectors per pair of the largest local
+  !> length would take more than recycle_bytes per rank (at least recycle_min_pairs)
+  integer(ip), parameter, public :: recycle_pairs = 96, recycle_min_pairs = 8
+  real(dp), parameter, public :: recycle_bytes = 192.0_dp*2**20
 
   type, public :: face_recycle_t
     logical :: on = .false.                     !< keep directions and use them (the caller's choice)
     integer(ip) :: k = 0                        !< pairs kept (columns 1..k, oldest first)
     integer(ip) :: n_used = 0                   !< pairs the current (last) run started from (its deflation basis)
+    integer(ip) :: capacity = 0                 !< pairs kept at most (set by the first begin_run; 0: not yet)
     real(dp), allocatable :: w(:, :), q(:, :)   !< p_j and q_j (local rows, capacity columns)
     real(dp), allocatable :: gram(:, :)         !< W^T Q over the kept columns
     logical, allocatable :: free(:)             !< union of the free rows of the kept pairs' runs
@@ -68,12 +70,21 @@ contains
     class(face_recycle_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
     logical, intent(in) :: free(:)
+    integer(ip) :: n_max, keep
+    integer :: ierr
     usable = .false.
     self%n_used = 0
     if (.not. self%on) return
+    if (self%capacity == 0) then
+      call MPI_Allreduce(problem%n, n_max, 1, MPI_INT_IP, MPI_MAX, problem%comm, ierr)
+      self%capacity = int(min(real(recycle_pairs, dp), recycle_bytes/(16.0_dp*max(n_max, 1_ip))), ip)
+      self%capacity = max(self%capacity, recycle_min_pairs)
+    end if
     call ensure_store(self, problem%n)
     if (self%k > 0) call restrict(self, problem, free)
-    if (self%k > recycle_capacity - recycle_reserve) call drop_oldest(self, self%k - (recycle_capacity - recycle_reserve))
+    ! room for this run's pairs: the kept ones at most two thirds of the store (the oldest dropped)
+    keep = (2*self%capacity)/3
+    if (self%k > keep) call drop_oldest(self, self%k - keep)
     self%free(1:problem%n) = self%free(1:problem%n) .and. free(1:problem%n)
     if (self%k == 0) return
     usable = factor(self)
@@ -128,7 +139,7 @@ contains
     if (.not. self%on) return
     n = problem%n
     call ensure_store(self, n)
-    if (self%k >= recycle_capacity) return
+    if (self%k >= self%capacity) return
     s = self%k + 1
     self%w(1:n, s) = p(1:n)
     self%q(1:n, s) = q(1:n)
@@ -255,7 +266,7 @@ contains
     character(len=*), intent(inout) :: msg
     integer(ip) :: k
     k = self%k
-    write (u, iostat=status, iomsg=msg) k
+    write (u, iostat=status, iomsg=msg) self%capacity, k
     if (status /= 0 .or. k == 0) return
     write (u, iostat=status, iomsg=msg) size(self%w, 1, kind=ip), self%w(:, 1:k), self%q(:, 1:k), &
       self%gram(1:k, 1:k), merge(1_ip, 0_ip, self%free)
@@ -268,16 +279,18 @@ contains
     integer, intent(in) :: u
     integer(ip), intent(in) :: n
     integer, intent(out) :: status
-    integer(ip) :: k, rows
+    integer(ip) :: k, rows, capacity
     integer(ip), allocatable :: flags(:)
-    call ensure_store(self, n)
-    call self%clear()
-    read (u, iostat=status) k
+    read (u, iostat=status) capacity, k
     if (status /= 0) return
     status = 1
-    if (k < 0 .or. k > recycle_capacity) return
+    if (capacity < 0 .or. k < 0 .or. k > capacity .or. (capacity == 0 .and. k > 0)) return
     status = 0
+    self%capacity = capacity
+    self%k = 0
+    self%n_used = 0
     if (k == 0) return
+    call ensure_store(self, n)
     allocate (flags(n))
     read (u, iostat=status) rows
     if (status /= 0) return
@@ -291,17 +304,17 @@ contains
     self%k = k
   end subroutine read_state
 
-  !> The arrays for n local rows (emptied when n changes).
+  !> The arrays for n local rows and `capacity` pairs (emptied when either changes).
   subroutine ensure_store(self, n)
     class(face_recycle_t), intent(inout) :: self
     integer(ip), intent(in) :: n
     if (allocated(self%w)) then
-      if (size(self%w, 1) == n) return
+      if (size(self%w, 1) == n .and. size(self%w, 2) == self%capacity) return
       deallocate (self%w, self%q, self%gram, self%chol, self%c, self%free)
     end if
-    allocate (self%w(n, recycle_capacity), self%q(n, recycle_capacity), &
-              self%gram(recycle_capacity, recycle_capacity), self%chol(recycle_capacity, recycle_capacity), &
-              self%c(recycle_capacity), self%free(n))
+    allocate (self%w(n, self%capacity), self%q(n, self%capacity), &
+              self%gram(self%capacity, self%capacity), self%chol(self%capacity, self%capacity), &
+              self%c(self%capacity), self%free(n))
     self%free = .false.
     self%k = 0
     self%n_used = 0
