@@ -48,6 +48,10 @@
 !> change the face is trusted (`trusted`): no give-up any more, and the run
 !> may go on to max_steps_trusted steps (the caller's budget for a face that
 !> looks right). A wrong face is stopped by its loose check instead.
+!> With `recycle%on` (a load history: the same A, new right-hand sides) the
+!> run keeps its directions and starts from those of earlier runs when they
+!> lie in its face: a Galerkin start after step 1, deflated CG in step 2
+!> (module face_recycle; no Hessian products).
 !> The problem provides C_F C_F^T through qp_problem's face hooks
 !> (face_init, face_coefficient). Every routine is collective.
 module face_solve
