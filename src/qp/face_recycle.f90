@@ -5,9 +5,9 @@
 !> with a lazy face operator), W = [p_j], Q = [q_j], and the Gram matrix
 !> W^T Q = W^T A W (the range terms drop out: C p_j = 0). A p_j vanishes on
 !> the rows that were active in its run. A new run on the face of `free`
-!> (`begin_run`) whose free rows contain those of the kept pairs' runs (so
-!> each p_j is a vector of its face; otherwise, a contact zone that shrinks,
-!> the store is emptied first):
+!> (`begin_run`) uses the kept pairs that are vectors of its face (those
+!> that vanish on its active rows; the others, after a contact zone shrank,
+!> are dropped):
 !> - the Galerkin start x <- x + W a, (W^T A W) a = W^T r (r = -P_F g), costs
 !>   no Hessian product (g <- g + Q a) and makes r orthogonal to span W;
 !> - deflated CG: each preconditioned residual z loses its A-projection onto
@@ -155,18 +155,25 @@ contains
     self%k = s
   end subroutine add
 
-  !> Empty the store when some kept free rows are active on the face of
-  !> `free` (a contact zone that shrinks: the kept directions are not vectors
-  !> of that face). Collective.
+  !> Drop the kept pairs that are not vectors of the face of `free`: those
+  !> that do not vanish on a row active there (a contact zone that shrinks;
+  !> a pair is exactly 0 on the rows active in its run). Collective.
   subroutine restrict(self, problem, free)
     class(face_recycle_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
     logical, intent(in) :: free(:)
-    logical :: inside
+    logical, allocatable :: keep(:), rows(:)
+    integer(ip) :: j
     integer :: ierr
-    inside = .not. any(self%free(1:problem%n) .and. .not. free(1:problem%n))
-    call MPI_Allreduce(MPI_IN_PLACE, inside, 1, MPI_LOGICAL, MPI_LAND, problem%comm, ierr)
-    if (.not. inside) call self%clear()
+    rows = self%free(1:problem%n) .and. .not. free(1:problem%n)
+    allocate (keep(self%k))
+    do j = 1, self%k
+      keep(j) = .not. any(rows .and. self%w(1:problem%n, j) /= 0)
+    end do
+    call MPI_Allreduce(MPI_IN_PLACE, keep, int(self%k), MPI_LOGICAL, MPI_LAND, problem%comm, ierr)
+    do j = self%k, 1, -1
+      if (.not. keep(j)) call drop_column(self, j)
+    end do
   end subroutine restrict
 
   !> Drop the `m` oldest pairs.
