@@ -128,6 +128,8 @@ def check_steps(args):
     # forces really change along the path (loading up, unloading down)
     forces = [r['total_force'] for r in steps]
     assert forces[0] < forces[1] < forces[2] and forces[2] > forces[3] > forces[4] > forces[5], forces
+    # the warm steps' face solves start from the kept face CG directions of the earlier steps
+    assert any(r['recycled_directions'] > 0 for r in steps[1:]), steps
     print('steps: worst |du|/|u| %.2e (bound %.1e), |dF|/|F| %.2e (bound %.1e)' % (worst_u, U_BOUND, worst_f, F_BOUND))
 
 
