@@ -92,8 +92,6 @@ module dual_problem
     !> the same face again reuses them (a load history whose active set stays)
     type(coarse_problem_t), pointer, private :: face_kept => null()
     logical, allocatable, private :: face_mask(:)
-    integer(ip) :: n_face_built = 0            !< face_init calls that built G_F G_F^T
-    integer(ip) :: n_face_reused = 0           !< face_init calls that reused the last face's
     logical, private :: stop_violation = .true.   !< &solver stopping = 'violation'
   contains
     procedure :: init
@@ -366,14 +364,12 @@ contains
     call MPI_Allreduce(MPI_IN_PLACE, same, 1, MPI_LOGICAL, MPI_LAND, self%comm, ierr)
     if (same) then
       self%face_cp => self%face_kept
-      self%n_face_reused = self%n_face_reused + 1
     else
       call timer_start('face: matrices')
       self%face_cp => self%op%masked_coarse(free, low_rank=.true.)
       call timer_stop('face: matrices')
       self%face_kept => self%face_cp
       self%face_mask = free(1:self%n)
-      self%n_face_built = self%n_face_built + 1
     end if
     self%face_ready = .true.
     if (present(reused)) reused = same
