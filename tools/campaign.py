@@ -445,7 +445,9 @@ STEP_COLUMNS = [("step", "step"), ("step_load_factor", "load_factor"), ("step_ga
                 ("step_total_force", "total_force"), ("step_active_nodes", "active_nodes"),
                 ("step_contact_radius", "contact_radius"), ("step_max_pressure", "max_pressure"),
                 ("step_outer", "outer_iterations"), ("step_hessian", "hessian_multiplications"),
-                ("step_warm_start", "warm_start"), ("step_kkt_worst", "kkt_worst"), ("step_kkt_passed", "kkt_passed"),
+                ("step_warm_start", "warm_start"), ("step_faces_reused", "faces_reused"),
+                ("step_recycled_directions", "recycled_directions"),
+                ("step_kkt_worst", "kkt_worst"), ("step_kkt_passed", "kkt_passed"),
                 ("step_seconds", "seconds/step"), ("step_rhs_seconds", "seconds/rhs"),
                 ("step_solve_seconds", "seconds/solve"), ("step_rec_new_seconds", "seconds/rec_new"),
                 ("step_rec_standard_seconds", "seconds/rec_standard")]

@@ -1,6 +1,7 @@
 !> The checkpoint of a load history: after a step, each rank writes the
 !> state the next step starts from (lambda of its owned rows, the SMALBE
-!> multiplier of its coarse blocks, whether 'auto' switched to 'dirichlet'),
+!> multiplier of its coarse blocks, whether 'auto' switched to 'dirichlet',
+!> the face CG directions kept for the next face solves),
 !> the number of the step done and the records of the steps so far, with a
 !> fingerprint of the input and the mesh, to <base>.<rank> (unformatted
 !> stream). Reading refuses a file that is missing, not a checkpoint, of
@@ -9,12 +10,13 @@
 module history_checkpoint
   use kinds, only: dp, ip, i8
   use text, only: str
+  use face_recycle, only: face_recycle_t
   implicit none
   private
 
   public :: write_checkpoint, read_checkpoint, text_hash
 
-  character(len=8), parameter :: magic = 'FCHIST02'
+  character(len=8), parameter :: magic = 'FCHIST03'
 
   !> What a step reports (the log line, report.json's `history`).
   type, public :: step_record_t
@@ -25,6 +27,9 @@ module history_checkpoint
     !> the start of the solve: 0 cold (zero), 1 the previous step's solution, 2 that scaled by the
     !> ratio of the load factors, 3 extrapolated linearly in the load factor from the two previous steps
     integer(ip) :: warm = 0
+    !> face solves of the step on the face before (its matrices reused), kept CG directions its
+    !> face solves started from (Galerkin starts)
+    integer(ip) :: faces_reused = 0, recycled = 0
     !> seconds (max over ranks): right-hand sides, solve, rec new, rec standard, primal, KKT, the whole step
     real(dp) :: seconds(7) = 0
     real(dp) :: kkt_worst = 0
@@ -50,12 +55,13 @@ module history_checkpoint
 
 contains
 
-  !> Write `ck` of this rank (`rank` of `nranks`) to <base>.<rank>.
+  !> Write `ck` and `recycle` of this rank (`rank` of `nranks`) to <base>.<rank>.
   !> `status` /= 0 with `msg` on an I/O error.
-  subroutine write_checkpoint(base, rank, nranks, ck, status, msg)
+  subroutine write_checkpoint(base, rank, nranks, ck, recycle, status, msg)
     character(len=*), intent(in) :: base
     integer, intent(in) :: rank, nranks
     type(checkpoint_t), intent(in) :: ck
+    type(face_recycle_t), intent(in) :: recycle     !< the face CG directions kept (warm starts)
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
     integer :: u
@@ -67,18 +73,21 @@ contains
       ck%switched, size(ck%warm%lambda, 1, kind=ip), size(ck%warm%muhat, 1, kind=ip), size(ck%records, kind=ip), &
       ck%warm%n, ck%warm%factor, ck%warm%gap, ck%warm%lambda, ck%warm%muhat, ck%records
     if (status /= 0) return
+    call recycle%write_state(u, status, msg)
+    if (status /= 0) return
     close (u, iostat=status, iomsg=msg)
   end subroutine write_checkpoint
 
   !> Read <base>.<rank> into `ck` and check it against `fingerprint`,
   !> `nranks` and the sizes `n_lambda`, `n_mu` of this run. `status` /= 0
   !> with a message naming the file and the reason otherwise.
-  subroutine read_checkpoint(base, rank, nranks, fingerprint, n_lambda, n_mu, ck, status, msg)
+  subroutine read_checkpoint(base, rank, nranks, fingerprint, n_lambda, n_mu, ck, recycle, status, msg)
     character(len=*), intent(in) :: base
     integer, intent(in) :: rank, nranks
     integer(i8), intent(in) :: fingerprint(2)
     integer(ip), intent(in) :: n_lambda, n_mu
     type(checkpoint_t), intent(out) :: ck
+    type(face_recycle_t), intent(inout) :: recycle
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
     character(len=8) :: tag
@@ -122,6 +131,7 @@ contains
     else
       allocate (ck%warm%lambda(nl, 2), ck%warm%muhat(nm, 2), ck%records(nr))
       read (u, iostat=ios) ck%warm%n, ck%warm%factor, ck%warm%gap, ck%warm%lambda, ck%warm%muhat, ck%records
+      if (ios == 0) call recycle%read_state(u, nl, ios)
       if (ios /= 0) then
         msg = 'checkpoint '//file//' is truncated (unreadable data)'
       else

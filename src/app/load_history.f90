@@ -32,6 +32,7 @@ module load_history
   use history_checkpoint, only: step_record_t, checkpoint_t, warm_state_t, write_checkpoint, read_checkpoint, &
                                 text_hash
   use stop_signal, only: install_stop_signal, stop_requested
+  use face_recycle, only: face_recycle_t
   use mpi_f08, only: MPI_Comm, MPI_Barrier, MPI_Allreduce, MPI_Comm_rank, MPI_Comm_size, MPI_IN_PLACE, &
                      MPI_MAX, MPI_MIN, MPI_SUM, MPI_INTEGER, MPI_Wtime
   implicit none
@@ -87,7 +88,7 @@ contains
     warm%lambda = 0
     warm%muhat = 0
     if (p%history%restart) then
-      call restart_from(p, comm, rank, nranks, op, dual, fingerprint, ck)
+      call restart_from(p, comm, rank, nranks, op, dual, fingerprint, ck, solver%polish%face%recycle)
       records = ck%records
       warm = ck%warm
       first = ck%step + 1
@@ -120,6 +121,9 @@ contains
         ! 2. the solve, warm started (warm_guess; nu = P lambda0, P lambda~ = 0, which SMALBE projects
         ! onto nu >= -lambda~)
         call solver%init(p%solver%smalbe, dual%hessian_norm())
+        ! warm: the face CG directions of the earlier steps start this step's face solves (F is the
+        ! same in every step; face_recycle)
+        solver%polish%face%recycle%on = p%history%warm_start
         nu = 0
         if (warm%n > 0 .and. p%history%warm_start) then
           call warm_guess(warm, rec%factor, rec%gap, work, muhat0, rec%warm)
@@ -167,7 +171,7 @@ contains
           ck%switched = merge(1, 0, dual%preconditioner_switched())
           ck%warm = warm
           ck%records = records
-          call save_checkpoint(p, comm, rank, nranks, ck)
+          call save_checkpoint(p, comm, rank, nranks, ck, solver%polish%face%recycle)
         end if
         stop_flag = 0
         if (stop_requested()) stop_flag = 1
@@ -209,6 +213,8 @@ contains
     rec%active_nodes = contact%active_nodes
     rec%outer = solver%n_outer
     rec%hessian = solver%n_hessian
+    rec%faces_reused = solver%polish%n_faces_reused
+    rec%recycled = solver%polish%n_recycled
     rec%kkt_worst = sol%kkt%worst()
     rec%alpha_difference = sol%alpha_difference
     rec%converged = merge(1, 0, solver%converged())
@@ -302,7 +308,7 @@ contains
   !> Read this rank's checkpoint, agree over the ranks that every one is
   !> valid and of the same step (else every rank stops with exit status 2
   !> and the first reason), switch 'auto' as the earlier steps did.
-  subroutine restart_from(p, comm, rank, nranks, op, dual, fingerprint, ck)
+  subroutine restart_from(p, comm, rank, nranks, op, dual, fingerprint, ck, recycle)
     type(params_t), intent(in) :: p
     type(MPI_Comm), intent(in) :: comm
     integer, intent(in) :: rank, nranks
@@ -310,9 +316,10 @@ contains
     type(tfeti_dualization_t), intent(inout) :: dual
     integer(i8), intent(in) :: fingerprint(2)
     type(checkpoint_t), intent(out) :: ck
+    type(face_recycle_t), intent(inout) :: recycle   !< the face CG directions the next steps start from
     integer :: status, bad, ierr, steps(2)
     character(len=600) :: msg
-    call read_checkpoint(checkpoint_base(p), rank, nranks, fingerprint, op%n_own(), op%n_coarse(), ck, status, msg)
+    call read_checkpoint(checkpoint_base(p), rank, nranks, fingerprint, op%n_own(), op%n_coarse(), ck, recycle, status, msg)
     if (status == 0 .and. ck%warm%n < 1) then
       status = 1
       msg = 'checkpoint '//trim(checkpoint_base(p))//' holds no solution'
@@ -367,15 +374,16 @@ contains
   end subroutine share_message
 
   !> Write every rank's checkpoint; an I/O error on any rank stops every rank.
-  subroutine save_checkpoint(p, comm, rank, nranks, ck)
+  subroutine save_checkpoint(p, comm, rank, nranks, ck, recycle)
     type(params_t), intent(in) :: p
     type(MPI_Comm), intent(in) :: comm
     integer, intent(in) :: rank, nranks
     type(checkpoint_t), intent(in) :: ck
+    type(face_recycle_t), intent(in) :: recycle
     integer :: status, worst, ierr
     character(len=600) :: msg
     call timer_start('checkpoint')
-    call write_checkpoint(checkpoint_base(p), rank, nranks, ck, status, msg)
+    call write_checkpoint(checkpoint_base(p), rank, nranks, ck, recycle, status, msg)
     call timer_stop('checkpoint')
     worst = merge(1, 0, status /= 0)
     call MPI_Allreduce(MPI_IN_PLACE, worst, 1, MPI_INTEGER, MPI_MAX, comm, ierr)
@@ -445,7 +453,8 @@ contains
       'step ', rec%step, '/', nsteps, ': factor ', rec%factor, ', gap ', rec%gap, ', force ', rec%total_force, &
       ', contact nodes ', rec%active_nodes, ', radius ', rec%contact_radius, ', max pressure ', rec%max_pressure, &
       ', outer ', rec%outer, ', Hessian ', rec%hessian, ' (', trim(start_names(rec%warm)), &
-      '), rec new ', rec%seconds(3), ' s, rec standard ', rec%seconds(4), ' s, KKT ', rec%kkt_worst, &
+      ', faces reused '//str(rec%faces_reused)//', recycled '//str(rec%recycled)//'), rec new ', &
+      rec%seconds(3), ' s, rec standard ', rec%seconds(4), ' s, KKT ', rec%kkt_worst, &
       merge(' ok    ', ' FAILED', rec%kkt_passed == 1)
     call log_message(trim(line))
   end subroutine log_step
@@ -485,6 +494,8 @@ contains
         call js%add_each([character(len=24) :: 'outer_iterations', 'hessian_multiplications'], &
                          int([r%outer, r%hessian], i8))
         call js%add('warm_start', trim(start_names(r%warm)))
+        call js%add_each([character(len=24) :: 'faces_reused', 'recycled_directions'], &
+                         int([r%faces_reused, r%recycled], i8))
         call js%begin_object('seconds')
         call js%add_each([character(len=16) :: 'rhs', 'solve', 'rec_new', 'rec_standard', 'primal', 'kkt', &
                           'step'], r%seconds)

@@ -53,7 +53,7 @@ module dual_problem
   use reconstruction, only: alpha_new, active_coarse_solve
   use coarse_problem, only: coarse_problem_t
   use dual_preconditioner, only: dual_preconditioner_t
-  use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX
+  use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_IN_PLACE, MPI_LAND, MPI_LOGICAL
   use timers, only: timer_start, timer_stop
   use logger, only: log_message
   implicit none
@@ -88,6 +88,10 @@ module dual_problem
     !> per run, a numerical factorization per face; feti_t%masked_coarse)
     type(coarse_problem_t), pointer, private :: face_cp => null()
     logical, private :: face_ready = .false.
+    !> the last face built (its free rows) and its matrices, while the masked instance holds them:
+    !> the same face again reuses them (a load history whose active set stays)
+    type(coarse_problem_t), pointer, private :: face_kept => null()
+    logical, allocatable, private :: face_mask(:)
     logical, private :: stop_violation = .true.   !< &solver stopping = 'violation'
   contains
     procedure :: init
@@ -116,6 +120,7 @@ module dual_problem
     procedure :: face_init
     procedure :: face_coefficient
     procedure :: face_free
+    procedure :: face_forget
     procedure :: face_operator
     procedure :: face_lazy
     procedure :: face_operator_lazy
@@ -344,16 +349,38 @@ contains
 
   !> Assemble and factorize G_F G_F^T over the rows in `free` (the equality
   !> rows are always free: their lower bound is no_lower_bound), reusing the
-  !> MUMPS analysis of the first face. Collective.
-  subroutine face_init(self, free)
+  !> MUMPS analysis of the first face; when `free` is the face built last and
+  !> the masked instance still holds it (face_forget not called since), its
+  !> matrices as they are (`reused`). Collective.
+  subroutine face_init(self, free, reused)
     class(dual_problem_t), intent(inout) :: self
     logical, intent(in) :: free(:)
+    logical, intent(out), optional :: reused
+    logical :: same
+    integer :: ierr
     call self%face_free()
-    call timer_start('face: matrices')
-    self%face_cp => self%op%masked_coarse(free, low_rank=.true.)
-    call timer_stop('face: matrices')
+    same = associated(self%face_kept) .and. allocated(self%face_mask)
+    if (same) same = all(self%face_mask .eqv. free(1:self%n))
+    call MPI_Allreduce(MPI_IN_PLACE, same, 1, MPI_LOGICAL, MPI_LAND, self%comm, ierr)
+    if (same) then
+      self%face_cp => self%face_kept
+    else
+      call timer_start('face: matrices')
+      self%face_cp => self%op%masked_coarse(free, low_rank=.true.)
+      call timer_stop('face: matrices')
+      self%face_kept => self%face_cp
+      self%face_mask = free(1:self%n)
+    end if
     self%face_ready = .true.
+    if (present(reused)) reused = same
   end subroutine face_init
+
+  !> The masked instance of the FETI operators is about to hold another
+  !> matrix (the standard reconstruction's G_A G_A^T): the next face_init builds.
+  subroutine face_forget(self)
+    class(dual_problem_t), intent(inout) :: self
+    self%face_kept => null()
+  end subroutine face_forget
 
   !> c = (G_F G_F^T)^{-1} G y (local coarse blocks). Collective.
   subroutine face_coefficient(self, y, c)
@@ -614,6 +641,7 @@ contains
     self%auto_mode = .false.
     if (allocated(self%wp)) deallocate (self%wp, self%wq, self%wm)
     call self%face_free()
+    call self%face_forget()
     self%op => null()
   end subroutine free
 end module dual_problem

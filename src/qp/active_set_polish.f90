@@ -104,6 +104,8 @@ module active_set_polish
     integer(ip) :: n_released = 0              !< active rows released in all (release)
     integer(ip) :: n_predicted = 0             !< rows made active by the prediction in all
     integer(ip) :: n_forced = 0                !< SMALBE inner solves whose bound was cut to force a step
+    integer(ip) :: n_faces_reused = 0          !< face solves on the face before, its matrices reused
+    integer(ip) :: n_recycled = 0              !< kept CG directions of earlier runs their starts used
     logical :: polished_first = .false.        !< the last solve started with a polish that was not given up
     !> the next first_face starts from the face of the given x (its free rows: a warm start),
     !> not from every bounded row at its bound; first_face clears it
@@ -226,6 +228,8 @@ contains
     self%n_released = 0
     self%n_predicted = 0
     self%n_forced = 0
+    self%n_faces_reused = 0
+    self%n_recycled = 0
     self%polished_first = .false.
   end subroutine polish_reset
 
@@ -396,6 +400,10 @@ contains
     if (self%n_predicted > 0) buf = trim(buf)//', predicted '//counted(self%n_predicted, 'row')//' at their bound'
     if (self%n_forced > 0) buf = trim(buf)//'; '//counted(self%n_forced, 'inner solve')// &
       ' after a polish made to take a step'
+    if (self%n_faces_reused > 0) buf = trim(buf)//'; '//counted(self%n_faces_reused, 'face')// &
+      ' of the face before (matrices reused)'
+    if (self%n_recycled > 0) buf = trim(buf)//'; Galerkin starts on '// &
+      counted(self%n_recycled, 'kept direction')
     call log_message(buf)
   end subroutine summary
 
@@ -411,6 +419,8 @@ contains
     call sink%put_long('polish_face_solves', int(self%n_rounds, i8))
     call sink%put_long('polish_released', int(self%n_released, i8))
     call sink%put_long('polish_predicted', int(self%n_predicted, i8))
+    call sink%put_long('polish_faces_reused', int(self%n_faces_reused, i8))
+    call sink%put_long('polish_recycled_directions', int(self%n_recycled, i8))
     ! whether the solve started with a polish that was not given up
     call sink%put_logical('polish_first_used', self%polished_first)
     ! the condition estimate of the face CG runs (null: none of 2 steps)
@@ -446,7 +456,7 @@ contains
     logical, intent(out) :: restored      !< the first face solve was given up: x, mu as before
     integer(ip) :: n, i, budget, budget_trusted, counts(2), rounds, n_changes, prev_changes
     real(dp) :: change_tol, loose
-    logical :: again, cycling, revisited, g_known, revisit_used
+    logical :: again, cycling, revisited, g_known, revisit_used, reused
     logical, allocatable :: cut_short(:)
     integer(i8), allocatable :: signatures(:, :)
     character(len=400) :: buf
@@ -481,7 +491,8 @@ contains
       ! the loose check only where another round may follow
       loose = 0
       if (rounds < self%settings%rounds) loose = self%settings%loose
-      call problem%face_init(self%free_now)
+      call problem%face_init(self%free_now, reused)
+      if (reused) self%n_faces_reused = self%n_faces_reused + 1
       ! after a round that only released rows, x is that round's face solution unchanged (on the new
       ! face too) and its gradient is known: the Lagrangian gradient without the multiplier term
       if (g_known) g(1:n) = g(1:n) - ct_mu(1:n)
@@ -493,6 +504,7 @@ contains
       call problem%face_free()
       cut_short(rounds) = self%face%stopped_loose
       self%n_rounds = self%n_rounds + 1
+      self%n_recycled = self%n_recycled + self%face%recycle%n_used
       n_hessian = n_hessian + self%face%n_hessian
       self%n_products = self%n_products + self%face%n_hessian
       self%n_steps = self%n_steps + self%face%n_steps

@@ -48,6 +48,10 @@
 !> change the face is trusted (`trusted`): no give-up any more, and the run
 !> may go on to max_steps_trusted steps (the caller's budget for a face that
 !> looks right). A wrong face is stopped by its loose check instead.
+!> With `recycle%on` (a load history: the same A, new right-hand sides) the
+!> run keeps its directions and starts from those of earlier runs when they
+!> lie in its face: a Galerkin start after step 1, deflated CG in step 2
+!> (module face_recycle; no Hessian products).
 !> The problem provides C_F C_F^T through qp_problem's face hooks
 !> (face_init, face_coefficient). Every routine is collective.
 module face_solve
@@ -56,6 +60,7 @@ module face_solve
   use mprgp, only: ensure_size
   use ritz_values, only: cg_ritz_t
   use solver_monitor, only: solver_monitor_t
+  use face_recycle, only: face_recycle_t
   use mpi_f08, only: MPI_Allreduce, MPI_SUM
   implicit none
   private
@@ -90,6 +95,8 @@ module face_solve
     logical :: trusted = .false.
     integer(ip) :: loose_counts(2) = 0   !< face_changes at the loose check (0 when not checked)
     type(solver_monitor_t) :: monitor    !< the caller's monitor: one line per CG step
+    !> the directions of earlier runs (when `recycle%on`): a Galerkin start on a face that holds them
+    type(face_recycle_t) :: recycle
     real(dp), allocatable, private :: r(:), z(:), p(:), q(:), w(:)
     real(dp), allocatable, private :: g0(:)   !< g at the start (problems with face_lazy)
     real(dp), allocatable, private :: cz(:)   !< coefficients of P_F z (muhat keeps those of g)
@@ -227,18 +234,26 @@ contains
     end if
     call face_project(problem, free, g, self%r, muhat)
     self%r = -self%r
+    unfolded = 0          ! updates of g since g0 (face_lazy: the range terms in g come from them)
+    if (lazy) then
+      call ensure_size(self%g0, n)
+      self%g0(1:n) = g(1:n)
+    end if
+    ! the directions of earlier runs (face_recycle): the Galerkin start (no product), then deflated CG
+    if (self%recycle%begin_run(problem, free)) then
+      call self%recycle%start(problem, x, g, self%r)
+      unfolded = 1
+      call face_project(problem, free, g, self%r, muhat)
+      self%r = -self%r
+    end if
     self%measure0 = measure(problem, self%r, per_component)
     self%measure = self%measure0
     self%reached = self%measure <= target
     if (present(loose)) loose_at = max(loose*self%measure0, target)
     check = loose_at > target
-    unfolded = 0          ! updates of g since g0 (face_lazy: the range terms in g come from them)
-    if (lazy .and. .not. self%reached) then
-      call ensure_size(self%g0, n)
-      self%g0(1:n) = g(1:n)
-    end if
     if (.not. self%reached) then
       call precondition(self, problem, free, prec)
+      call self%recycle%deflate(problem, self%z)
       self%p = self%z
       rz = problem%dot(self%r, self%z)
       call self%ritz%begin_run()
@@ -257,6 +272,7 @@ contains
           exit
         end if
         alpha = rz/pq
+        call self%recycle%add(problem, free, self%p, self%q)
         call self%ritz%add_alpha(alpha)
         x(1:n) = x(1:n) + alpha*self%p
         g(1:n) = g(1:n) + alpha*self%q
@@ -283,6 +299,7 @@ contains
         if (prec .and. problem%watches_condition()) &
           call problem%condition_estimate(max(self%ritz%max_ratio, self%ritz%current_ratio()), switched)
         call precondition(self, problem, free, prec)
+        call self%recycle%deflate(problem, self%z)
         rz_new = problem%dot(self%r, self%z)
         if (switched) then
           self%p = self%z

@@ -38,8 +38,9 @@
 !>
 !> Face solver (optional, SMALBE's polish step): a problem with an equality
 !> constraint whose `has_face_solver()` is true can restrict C to the free
-!> rows F of an active set: `face_init(free)` prepares C_F C_F^T (free: the
-!> local mask of F), `face_coefficient(y, c)` gives the multiplier-form
+!> rows F of an active set: `face_init(free, reused)` prepares C_F C_F^T (free:
+!> the local mask of F; `reused`: the last face's matrices were those and are
+!> kept), `face_coefficient(y, c)` gives the multiplier-form
 !> coefficients c (length eq_size, the form eq_apply_t takes) of the least
 !> squares fit (C_F C_F^T)^{-1} C y, so that the face projector onto
 !> {y : y_A = 0, C y = 0} reads P_F y = y_F - (eq_apply_t(c))_F for c of y_F
@@ -358,9 +359,11 @@ contains
   end function default_face_always_regular
 
   !> Prepare C_F C_F^T for the free rows `free` (local mask). Collective.
-  subroutine default_face_init(self, free)
+  subroutine default_face_init(self, free, reused)
     class(qp_problem_t), intent(inout) :: self
     logical, intent(in) :: free(:)
+    logical, intent(out), optional :: reused
+    if (present(reused)) reused = .false.
     call not_provided(self, 'face_init', 'free', size(free))
   end subroutine default_face_init
 

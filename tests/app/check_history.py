@@ -18,6 +18,15 @@ CHECK is one of
   signal    SIGUSR1 to mpirun (forwarded to the ranks; SIGTERM under a batch
             system) stops a long history after the step under way, with its
             checkpoint; restart = .true. continues with the next step to the end.
+  savings   warm starts on a history whose active set cannot change (a
+            cube pressed by its top face onto a plane: its whole bottom in
+            contact at every load, lambda linear in the load): each step after the first starts from the exact
+            extrapolation, so it needs at most WARM_STEP_BOUND products
+            where a cold step needs the whole solve; with
+            &reconstruction method = 'multiplier' (the masked coarse
+            instance left to the faces) every warm step reuses the face
+            matrices of the step before, and gives the same step as with
+            'both' (faces built again).
   paraview  ParaView (pvpython, Debian's python3-paraview, under xvfb-run)
             opens the temporal XDMF and steps through every time; exit 77
             (skipped) when pvpython is absent.
@@ -119,7 +128,70 @@ def check_steps(args):
     # forces really change along the path (loading up, unloading down)
     forces = [r['total_force'] for r in steps]
     assert forces[0] < forces[1] < forces[2] and forces[2] > forces[3] > forces[4] > forces[5], forces
+    # the warm steps' face solves start from the kept face CG directions of the earlier steps
+    assert any(r['recycled_directions'] > 0 for r in steps[1:]), steps
     print('steps: worst |du|/|u| %.2e (bound %.1e), |dF|/|F| %.2e (bound %.1e)' % (worst_u, U_BOUND, worst_f, F_BOUND))
+
+
+BLOCK = """&mesh nsub = 2, 2, 2, nel = 3, 3, 3 /
+&material young = 2.1e5, poisson = 0.3 /
+&boundary top_dirichlet = .true., top_displacement = 0.0, 0.0, -0.01 /
+&obstacle shape = 'plane', gap = 0.0 /
+&solver tol = 1e-8 /
+&reconstruction method = '{method}' /
+&output directory = '{out}', run_name = 'run', write_hdf5 = .false. /
+&history nsteps = 5, path = 'ramp', warm_start = {warm} /
+"""
+# a warm step on the face of the step before with the exact extrapolation: its start meets
+# the tolerance up to the two previous solves' errors (amplified at most 3x by the
+# extrapolation with equal increments), so the face check (1 product), the start gradient
+# of the face solve (1) and the few CG steps that take 3x tol below the face target
+# (tol / 2: a factor 6, two steps at CG's worst rate of 3 per step on this face) suffice
+WARM_STEP_BOUND = 4
+
+
+def block_history(args, work, name, method, warm):
+    out = os.path.join(work, name)
+    nml = os.path.join(work, name + '.nml')
+    with open(nml, 'w') as f:
+        f.write(BLOCK.format(method=method, out=out, warm='.true.' if warm else '.false.'))
+    run(args, nml)
+    return json.load(open(os.path.join(out, 'report.json')))['history']
+
+
+def check_savings(args):
+    work = fresh(os.path.join(args.workdir, 'savings'))
+    cold = block_history(args, work, 'cold', 'both', False)
+    warm = block_history(args, work, 'warm', 'both', True)
+    kept = block_history(args, work, 'kept', 'multiplier', True)
+    for rec in cold + warm + kept:
+        assert rec['converged'] and rec['kkt_passed'], rec
+    hc = [r['hessian_multiplications'] for r in cold]
+    hw = [r['hessian_multiplications'] for r in warm]
+    print('Hessian products per step: cold %s, warm %s' % (hc, hw))
+    # the first step is a cold solve in both
+    assert hw[0] == hc[0], (hw, hc)
+    # the active set is that of the first step at every load (uniform contact pressure)
+    assert len(set(r['active_nodes'] for r in warm)) == 1, warm
+    assert all(h <= WARM_STEP_BOUND for h in hw[1:]), 'warm steps need more than %d products: %s' % (
+        WARM_STEP_BOUND, hw)
+    # hence the history's saving: at least 2x as soon as a cold solve needs 2 * WARM_STEP_BOUND
+    assert min(hc[1:]) >= 2 * WARM_STEP_BOUND, hc
+    assert 2 * sum(hw[1:]) <= sum(hc[1:]), (hw, hc)
+    # face reuse: with 'multiplier' the steps after the first reuse the face of the step before
+    reused = [r['faces_reused'] for r in kept]
+    print('faces reused per step (method multiplier): %s; with both: %s' % (
+        reused, [r['faces_reused'] for r in warm]))
+    assert all(n >= 1 for n in reused[1:]), reused
+    assert all(r['faces_reused'] == 0 for r in warm), warm
+    # ... and a reused face gives the step a fresh one gives
+    for a, b in zip(warm, kept):
+        assert a['hessian_multiplications'] == b['hessian_multiplications'], (a, b)
+        df = abs(a['total_force'] - b['total_force']) / abs(a['total_force'])
+        assert df <= 1e-12, 'step %d: force %.17g (faces built) vs %.17g (reused)' % (
+            a['step'], a['total_force'], b['total_force'])
+    print('savings: warm %d products after the first step against cold %d; faces reused %d' % (
+        sum(hw[1:]), sum(hc[1:]), sum(reused)))
 
 
 def strip_times(records):
@@ -306,11 +378,11 @@ def main():
     ap.add_argument('--mpiexec', default='mpirun')
     ap.add_argument('--ranks', type=int, default=2)
     ap.add_argument('--workdir', required=True)
-    ap.add_argument('check', choices=['steps', 'restart', 'bad', 'signal', 'paraview'])
+    ap.add_argument('check', choices=['steps', 'restart', 'bad', 'signal', 'paraview', 'savings'])
     args = ap.parse_args()
     os.makedirs(args.workdir, exist_ok=True)
     status = {'steps': check_steps, 'restart': check_restart, 'bad': check_bad,
-              'signal': check_signal, 'paraview': check_paraview}[args.check](args)
+              'signal': check_signal, 'paraview': check_paraview, 'savings': check_savings}[args.check](args)
     return status or 0
 
 

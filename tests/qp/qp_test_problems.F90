@@ -325,11 +325,13 @@ contains
   end function dense_face_always_regular
 
   !> C_F C_F^T of the free rows (local mask `free`, gathered), factorized.
-  subroutine dense_face_init(self, free)
+  subroutine dense_face_init(self, free, reused)
     class(dense_qp_t), intent(inout) :: self
     logical, intent(in) :: free(:)
+    logical, intent(out), optional :: reused
     real(dp), allocatable :: mask(:), cf(:, :)
     integer(ip) :: j
+    if (present(reused)) reused = .false.
     allocate (mask(self%n_global))
     call self%gather(merge(1.0_dp, 0.0_dp, free(1:self%n)), mask)
     cf = self%c_full
