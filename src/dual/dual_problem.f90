@@ -45,7 +45,7 @@
 !> between copies, Dirichlet error, penetration) by tol times the
 !> displacements of the data (stop_scale; docs/THEORY.md "Stopping test").
 module dual_problem
-  use kinds, only: dp, ip, MPI_REAL_DP
+  use kinds, only: dp, ip, i8, MPI_REAL_DP
   use errors, only: fatal_error
   use qp_problem, only: qp_problem_t, no_lower_bound
   use feti_operators, only: feti_t, local_field_t
@@ -88,10 +88,12 @@ module dual_problem
     !> per run, a numerical factorization per face; feti_t%masked_coarse)
     type(coarse_problem_t), pointer, private :: face_cp => null()
     logical, private :: face_ready = .false.
-    !> the last face built (its free rows) and its matrices, while the masked instance holds them:
-    !> the same face again reuses them (a load history whose active set stays)
+    !> the last face built (its free rows), its matrices and the masked instance's change count then:
+    !> the same face again, the instance unchanged since, reuses them (a load history whose active
+    !> set stays)
     type(coarse_problem_t), pointer, private :: face_kept => null()
     logical, allocatable, private :: face_mask(:)
+    integer(i8), private :: face_masked_count = -1
     logical, private :: stop_violation = .true.   !< &solver stopping = 'violation'
   contains
     procedure :: init
@@ -120,7 +122,6 @@ module dual_problem
     procedure :: face_init
     procedure :: face_coefficient
     procedure :: face_free
-    procedure :: face_forget
     procedure :: face_operator
     procedure :: face_lazy
     procedure :: face_operator_lazy
@@ -350,8 +351,8 @@ contains
   !> Assemble and factorize G_F G_F^T over the rows in `free` (the equality
   !> rows are always free: their lower bound is no_lower_bound), reusing the
   !> MUMPS analysis of the first face; when `free` is the face built last and
-  !> the masked instance still holds it (face_forget not called since), its
-  !> matrices as they are (`reused`). Collective.
+  !> the masked instance still holds it (feti_t%masked_changes), its matrices
+  !> as they are (`reused`). Collective.
   subroutine face_init(self, free, reused)
     class(dual_problem_t), intent(inout) :: self
     logical, intent(in) :: free(:)
@@ -360,6 +361,7 @@ contains
     integer :: ierr
     call self%face_free()
     same = associated(self%face_kept) .and. allocated(self%face_mask)
+    if (same) same = self%op%masked_changes() == self%face_masked_count
     if (same) same = all(self%face_mask .eqv. free(1:self%n))
     call MPI_Allreduce(MPI_IN_PLACE, same, 1, MPI_LOGICAL, MPI_LAND, self%comm, ierr)
     if (same) then
@@ -370,17 +372,12 @@ contains
       call timer_stop('face: matrices')
       self%face_kept => self%face_cp
       self%face_mask = free(1:self%n)
+      self%face_masked_count = self%op%masked_changes()
     end if
     self%face_ready = .true.
     if (present(reused)) reused = same
   end subroutine face_init
 
-  !> The masked instance of the FETI operators is about to hold another
-  !> matrix (the standard reconstruction's G_A G_A^T): the next face_init builds.
-  subroutine face_forget(self)
-    class(dual_problem_t), intent(inout) :: self
-    self%face_kept => null()
-  end subroutine face_forget
 
   !> c = (G_F G_F^T)^{-1} G y (local coarse blocks). Collective.
   subroutine face_coefficient(self, y, c)
@@ -641,7 +638,8 @@ contains
     self%auto_mode = .false.
     if (allocated(self%wp)) deallocate (self%wp, self%wq, self%wm)
     call self%face_free()
-    call self%face_forget()
+    self%face_kept => null()
+    self%face_masked_count = -1
     self%op => null()
   end subroutine free
 end module dual_problem

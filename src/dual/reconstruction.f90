@@ -129,7 +129,7 @@ contains
     allocate (mask(op%n_own()), ga(op%n_own()))
     t0 = MPI_Wtime()
     call active_contact_mask(op, lambda, active_tol, mask, cost%active_rows)
-    active_cp => op%masked_coarse(mask, low_rank=.false.)
+    active_cp => op%masked_coarse(mask, low_rank=.false., own_view=.true.)
     cost%factorization = active_cp%factorization_seconds()
     cost%assembly = MPI_Wtime() - t0 - cost%factorization
     t0 = MPI_Wtime()

@@ -280,8 +280,6 @@ contains
     a_std = 0
     if (this%method /= 'standard') call this%dual%alpha_bar(g, mu_scaled, a_new)   ! Eq. 24 or 25
     if (this%method /= 'multiplier') then
-      ! the masked instance holds G_A G_A^T from here on, no longer the last face of the solve
-      call this%dual%face_forget()
       call alpha_standard(this%op, sol%lambda, g, this%active_tol, a_std, sol%standard_cost)
       write (line, '(a,3(es10.3,a))') 'standard formula: assembly ', sol%standard_cost%assembly, &
         ' s, factorization ', sol%standard_cost%factorization, ' s, solve ', sol%standard_cost%solve, ' s'

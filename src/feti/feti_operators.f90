@@ -102,6 +102,7 @@ module feti_operators
     procedure :: keyed_random
     procedure :: init_active_coarse
     procedure :: masked_coarse
+    procedure :: masked_changes
     procedure :: init_orthonormal
     procedure :: init_preconditioner
     ! accessors
@@ -322,15 +323,24 @@ contains
   !> that is cheaper (SMALBE's faces; not the standard reconstruction, which
   !> factorizes G_A G_A^T as a conventional code does).
   !> `force_low_rank` (tests): the low-rank way whenever it applies.
-  function masked_coarse(this, mask, low_rank, force_low_rank) result(cp)
+  !> `own_view`: a Schur view in an instance of its own, the reusable one
+  !> keeping what it holds (projector%masked_coarse).
+  function masked_coarse(this, mask, low_rank, force_low_rank, own_view) result(cp)
     class(feti_t), intent(inout), target :: this
     logical, intent(in) :: mask(:)
     logical, intent(in) :: low_rank
-    logical, intent(in), optional :: force_low_rank
+    logical, intent(in), optional :: force_low_rank, own_view
     type(coarse_problem_t), pointer :: cp
     cp => this%proj%masked_coarse(this%dec, this%b, mask, this%dirichlet_fixes_rigid_modes(), low_rank, &
-                                  force_low_rank)
+                                  force_low_rank, own_view)
   end function masked_coarse
+
+  !> How many times masked_coarse's reusable instance has changed (the same
+  !> count before and after: it holds the same matrix).
+  integer(i8) function masked_changes(this)
+    class(feti_t), intent(in) :: this
+    masked_changes = this%proj%masked_changes()
+  end function masked_changes
 
   !> The explicit G~ = L^{-1} G of `&solver coarse = 'orthonormal'`. Collective.
   subroutine init_orthonormal(this, orth)

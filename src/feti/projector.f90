@@ -34,6 +34,10 @@ module projector
     !> G_M G_M^T of masked_coarse: analysed once (on the pattern of G G^T), refactorized per mask
     type(coarse_problem_t) :: masked
     integer :: masked_mode = 0                       !< masked holds: 0 nothing, masked_base, masked_refactorized
+    !> bumped whenever `masked` changes: a caller that kept its matrix knows whether it still holds it
+    integer(i8) :: masked_generation = 0
+    !> a second Schur view (own_view: the standard reconstruction's G_A G_A^T beside the last face)
+    type(coarse_problem_t) :: own
     real(dp), allocatable :: cwork(:), cwork2(:)     !< work: local coarse blocks
     integer(i8) :: solves = 0
   contains
@@ -42,6 +46,7 @@ module projector
     procedure :: project
     procedure :: init_active_coarse
     procedure :: masked_coarse
+    procedure :: masked_changes
     procedure :: init_orthonormal
     procedure :: n_solves
     procedure :: coarse_problem
@@ -167,13 +172,16 @@ contains
   !>   as explicit zeros; coarse_problem%refactorize).
   !> Collective.
   !> `force_low_rank` (tests): the low-rank way whenever it applies, whatever k.
-  function masked_coarse(this, dec, b, mask, regular_base, low_rank, force_low_rank) result(cp)
+  !> `own_view`: a Schur view goes into a second instance, so that the
+  !> reusable one keeps what it holds (the last face of the solve); the other
+  !> ways still use the reusable instance (masked_changes counts its changes).
+  function masked_coarse(this, dec, b, mask, regular_base, low_rank, force_low_rank, own_view) result(cp)
     class(projector_t), intent(inout), target :: this
     type(decomposition_t), intent(in) :: dec
     type(b_operator_t), intent(inout), target :: b
     logical, intent(in) :: mask(:)
     logical, intent(in) :: regular_base, low_rank
-    logical, intent(in), optional :: force_low_rank
+    logical, intent(in), optional :: force_low_rank, own_view
     type(coarse_problem_t), pointer :: cp
     type(constraints_t), pointer :: con
     logical, allocatable :: contact(:)
@@ -195,8 +203,13 @@ contains
     call MPI_Allreduce(local, total, 2, MPI_INT_IP, MPI_SUM, this%comm, ierr)
     k = total(1)
     if (all_rows(mask, con%n_own)) then
-      call this%masked%make_alias(this%coarse)
-      this%masked_mode = masked_view
+      cp => this%own
+      if (.not. present_and_true(own_view)) then
+        cp => this%masked
+        this%masked_generation = this%masked_generation + 1
+        this%masked_mode = masked_view
+      end if
+      call cp%make_alias(this%coarse)
       return
     end if
     ! cost model: the main factorization's figures (the same pattern)
@@ -207,9 +220,18 @@ contains
     ! one decision on every rank (each coarse group has its own MUMPS figures)
     call MPI_Allreduce(MPI_IN_PLACE, cheap, 1, MPI_LOGICAL, MPI_LAND, this%comm, ierr)
     if (this%coarse%has_schur() .and. regular_base .and. total(2) == 0) then
-      call schur_view(this, dec, con, mask, contact)
+      if (present_and_true(own_view)) then
+        cp => this%own
+        call schur_view(this, dec, con, mask, contact, this%own)
+        return
+      end if
+      call schur_view(this, dec, con, mask, contact, this%masked)
       this%masked_mode = masked_view
-    else if (low_rank .and. regular_base .and. total(2) == 0 .and. cheap) then
+      this%masked_generation = this%masked_generation + 1
+      return
+    end if
+    this%masked_generation = this%masked_generation + 1
+    if (low_rank .and. regular_base .and. total(2) == 0 .and. cheap) then
       if (this%masked_mode /= masked_base) then
         if (this%masked%is_reusable()) then
           call this%masked%refactorize(dec, con, .not. contact)
@@ -265,6 +287,12 @@ contains
       this%masked_mode = masked_refactorized
     end if
   contains
+
+    pure logical function present_and_true(flag)
+      logical, intent(in), optional :: flag
+      present_and_true = .false.
+      if (present(flag)) present_and_true = flag
+    end function present_and_true
 
     !> Every row of every rank in the mask. Collective.
     logical function all_rows(mask, n)
@@ -348,13 +376,14 @@ contains
     gram = gram(:, :, order)
   end subroutine contact_face_subdomains
 
-  !> masked holds G_M G_M^T as a view of the coarse problem's Schur factors:
+  !> `view` holds G_M G_M^T as a view of the coarse problem's Schur factors:
   !> every row outside the mask is a contact row. Collective.
-  subroutine schur_view(this, dec, con, mask, contact)
-    class(projector_t), intent(inout) :: this
+  subroutine schur_view(this, dec, con, mask, contact, view)
+    class(projector_t), intent(in) :: this
     type(decomposition_t), intent(in) :: dec
     type(constraints_t), intent(inout) :: con
     logical, intent(in) :: mask(:), contact(:)
+    type(coarse_problem_t), intent(inout) :: view
     real(dp), allocatable :: col(:), wloc(:), g(:, :)
     integer(i8), allocatable :: keys(:)
     integer(ip), allocatable :: pos(:)
@@ -393,8 +422,15 @@ contains
         end do
       end associate
     end do
-    call this%masked%make_view(this%coarse, keys, pos, g)
+    call view%make_view(this%coarse, keys, pos, g)
   end subroutine schur_view
+
+  !> How many times the reusable masked instance has changed (masked_coarse
+  !> without own_view): equal before and after means it holds the same matrix.
+  integer(i8) function masked_changes(this)
+    class(projector_t), intent(in) :: this
+    masked_changes = this%masked_generation
+  end function masked_changes
 
   !> The explicit G~ = L^{-1} G of `&solver coarse = 'orthonormal'`. Collective.
   subroutine init_orthonormal(this, dec, b, orth)
@@ -423,6 +459,7 @@ contains
     class(projector_t), intent(inout) :: this
     call this%coarse%free()
     call this%masked%free()
+    call this%own%free()
     this%masked_mode = 0
     if (allocated(this%cwork)) deallocate (this%cwork, this%cwork2)
     this%solves = 0
