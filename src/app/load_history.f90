@@ -123,7 +123,7 @@ contains
         call solver%init(p%solver%smalbe, dual%hessian_norm())
         ! warm: the face CG directions of the earlier steps start this step's face solves (F is the
         ! same in every step; face_recycle)
-        solver%polish%face%recycle%on = p%history%warm_start
+        solver%polish%face%recycle%on = p%history%warm_start .and. p%history%recycle
         nu = 0
         if (warm%n > 0 .and. p%history%warm_start) then
           call warm_guess(warm, rec%factor, rec%gap, work, muhat0, rec%warm)

@@ -30,6 +30,8 @@ module history_settings
     logical :: restart = .false.                !< continue from the checkpoint of the same input
     real(dp) :: time_limit = 0                  !< stop after the step that exceeds it [s] (0: none)
     logical :: warm_start = .true.              !< start each step from the previous one (else from 0)
+    !> with warm_start: start the face solves from the face CG directions of the earlier steps
+    logical :: recycle = .false.
   contains
     procedure :: check => history_check
     procedure :: read_namelist => history_read
@@ -75,6 +77,8 @@ contains
                //' values for nsteps = '//int_text(n))
     else if (.not. (self%time_limit >= 0)) then
       call bad('time_limit', 'must be >= 0 seconds (0: none)', real_text(self%time_limit))
+    else if (self%recycle .and. .not. self%warm_start) then
+      call bad('recycle', 'needs warm_start = .true. (the directions are part of the warm start)', 'T')
     end if
   contains
     subroutine bad(name, text, value)
@@ -130,20 +134,21 @@ contains
     character(len=name_len) :: path
     real(dp) :: factor_peak, time_limit
     real(dp), allocatable :: load_factors(:), gaps(:)
-    logical :: checkpoint, restart, warm_start
-    namelist /history/ nsteps, path, factor_peak, load_factors, gaps, checkpoint, restart, time_limit, warm_start
+    logical :: checkpoint, restart, warm_start, recycle
+    namelist /history/ nsteps, path, factor_peak, load_factors, gaps, checkpoint, restart, time_limit, warm_start, &
+      recycle
     allocate (load_factors(max_steps), gaps(max_steps))
     nsteps = self%nsteps; path = self%path; factor_peak = self%factor_peak
     load_factors = self%load_factors; gaps = self%gaps
     checkpoint = self%checkpoint; restart = self%restart; time_limit = self%time_limit
-    warm_start = self%warm_start
+    warm_start = self%warm_start; recycle = self%recycle
     read (group, nml=history, iostat=status, iomsg=msg)
     if (status /= 0) return
     self%given = .true.
     self%nsteps = nsteps; self%path = lower_case(path); self%factor_peak = factor_peak
     self%load_factors = load_factors; self%gaps = gaps
     self%checkpoint = checkpoint; self%restart = restart; self%time_limit = time_limit
-    self%warm_start = warm_start
+    self%warm_start = warm_start; self%recycle = recycle
   end subroutine history_read
 
   !> Write the group as the namelist '&history ... /' (the lists with the
@@ -156,12 +161,12 @@ contains
     integer(ip) :: nsteps
     character(len=name_len) :: path
     real(dp) :: factor_peak, time_limit
-    logical :: checkpoint, restart, warm_start
+    logical :: checkpoint, restart, warm_start, recycle
     integer :: last, k
-    namelist /history/ nsteps, path, factor_peak, checkpoint, restart, time_limit, warm_start
+    namelist /history/ nsteps, path, factor_peak, checkpoint, restart, time_limit, warm_start, recycle
     nsteps = self%nsteps; path = self%path; factor_peak = self%factor_peak
     checkpoint = self%checkpoint; restart = self%restart; time_limit = self%time_limit
-    warm_start = self%warm_start
+    warm_start = self%warm_start; recycle = self%recycle
     lines = ''
     write (lines, nml=history, delim='quote', iostat=status, iomsg=msg)
     if (status /= 0) return

@@ -97,7 +97,8 @@ def check_steps(args):
     hist_out = os.path.join(work, 'history')
     # 6 steps: factors 1/3, 2/3, 1, 3/4, 1/2, 1/4; the obstacle moves on the way down
     gaps = [0.0, 0.0, 0.0, 0.001, 0.002, 0.002]
-    history = "&history nsteps = 6, path = 'load_unload', gaps = %s /\n" % ', '.join(repr(g) for g in gaps)
+    history = "&history nsteps = 6, path = 'load_unload', recycle = .true., gaps = %s /\n" % ', '.join(
+        repr(g) for g in gaps)
     nml = os.path.join(work, 'history.nml')
     write_input(nml, TOP_UZ, 0.0, hist_out, history)
     run(args, nml)
@@ -142,7 +143,7 @@ BLOCK = """&mesh nsub = {nsub}, {nsub}, {nsub}, nel = {nel}, {nel}, {nel} /
 &solver tol = 1e-8 /
 &reconstruction method = '{method}' /
 &output directory = '{out}', run_name = 'run', write_hdf5 = .false. /
-&history nsteps = 5, path = 'ramp', warm_start = {warm} /
+&history nsteps = 5, path = 'ramp', warm_start = {warm}, recycle = {warm} /
 """
 # a warm step on the face of the step before with the exact extrapolation: its start meets
 # the tolerance up to the two previous solves' errors (amplified at most 3x by the
@@ -225,7 +226,7 @@ def check_restart(args):
     work = fresh(os.path.join(args.workdir, 'restart_np%d' % args.ranks))
     full_out = os.path.join(work, 'full')
     part_out = os.path.join(work, 'part')
-    hist = "&history nsteps = 5, path = 'load_unload'%s /\n"
+    hist = "&history nsteps = 5, path = 'load_unload', recycle = .true.%s /\n"
     nml = os.path.join(work, 'full.nml')
     write_input(nml, TOP_UZ, 0.0, full_out, hist % '')
     run(args, nml)
@@ -287,6 +288,8 @@ def check_bad(args):
         ("&history nsteps = 2, gaps = 0.0, -0.5 /", r"group &history, variable gaps: the obstacle must not be deeper"),
         ('&history nsteps = 2, factor_peak = 0 /', r'group &history, variable factor_peak: must be > 0'),
         ('&history nsteps = 2, time_limit = -1 /', r'group &history, variable time_limit: must be >= 0'),
+        ('&history nsteps = 2, warm_start = .false., recycle = .true. /',
+         r'group &history, variable recycle: needs warm_start = .true.'),
         ('&history nsteps = 2, speed = 1 /', r'group &history: variable speed: not a variable of this group'),
     ]
     for k, (group, pattern) in enumerate(cases):
