@@ -56,7 +56,7 @@
 !> (face_init, face_coefficient). Every routine is collective.
 module face_solve
   use kinds, only: dp, ip, MPI_INT_IP
-  use qp_problem, only: qp_problem_t, no_lower_bound
+  use qp_problem, only: qp_problem_t, no_lower_bound, x_moved, moved_other
   use mprgp, only: ensure_size
   use ritz_values, only: cg_ritz_t
   use solver_monitor, only: solver_monitor_t
@@ -158,8 +158,8 @@ contains
     n = problem%n
     allocate (w(n))
     w = merge(y(1:n), 0.0_dp, free(1:n))
-    call problem%face_coefficient(w, c)
-    call problem%eq_apply_t(c, py)
+    call problem%face%coefficient(w, c)
+    call problem%eq%apply_t(c, py)
     py(1:n) = merge(w - py(1:n), 0.0_dp, free(1:n))
   end subroutine face_project
 
@@ -209,8 +209,8 @@ contains
     self%loose_counts = 0
     self%trusted = .false.
     cap = max_steps
-    prec = problem%has_preconditioner()
-    lazy = problem%face_lazy()
+    prec = allocated(problem%prec)
+    lazy = problem%face%lazy()
     loose_at = target
     ctol = 0
     if (present(change_tol)) ctol = change_tol
@@ -220,11 +220,11 @@ contains
     if (.not. known) then
       ! 1. onto the face: x_A = l_A, then C x = 0 by the least squares correction on F
       x(1:n) = merge(x(1:n), problem%lower(1:n), free(1:n))
-      call problem%face_coefficient(x, muhat)
-      call problem%eq_apply_t(muhat, self%w)
+      call problem%face%coefficient(x, muhat)
+      call problem%eq%apply_t(muhat, self%w)
       x(1:n) = x(1:n) - merge(self%w, 0.0_dp, free(1:n))
     end if
-    call problem%track_reset()
+    call x_moved(problem, moved_other)
 
     ! 2. PCPG
     if (.not. known) then
@@ -260,9 +260,9 @@ contains
       do while (self%n_steps < cap)
         if (lazy) then
           ! q = A p + C^T c: g carries the C^T c terms, P_F removes them from r (step 4. takes them out of g)
-          call problem%face_operator_lazy(self%p, self%q)
+          call problem%face%apply_lazy(self%p, self%q)
         else
-          call problem%face_operator(self%p, self%q)
+          call problem%face%apply(self%p, self%q)
         end if
         self%n_hessian = self%n_hessian + 1
         self%n_steps = self%n_steps + 1
@@ -296,8 +296,10 @@ contains
         ! a problem that watches its face condition may change its preconditioner
         ! here (qp_problem; &solver preconditioner = 'auto'): then CG restarts, p = z
         switched = .false.
-        if (prec .and. problem%watches_condition()) &
-          call problem%condition_estimate(max(self%ritz%max_ratio, self%ritz%current_ratio()), switched)
+        if (prec) then
+          if (problem%prec%watches()) &
+            call problem%prec%condition(max(self%ritz%max_ratio, self%ritz%current_ratio()), switched)
+        end if
         call precondition(self, problem, free, prec)
         call self%recycle%deflate(problem, self%z)
         rz_new = problem%dot(self%r, self%z)
@@ -314,7 +316,7 @@ contains
     end if
     ! 3. the face multiplier mu = -(C_F C_F^T)^{-1} C_F g_F: muhat holds the coefficients of
     ! the last projection of g, made after g last changed (the preconditioner's go to cz)
-    call problem%track_reset()
+    call x_moved(problem, moved_other)
     if (self%aborted) return
     ! 4. (face_lazy) the range terms out of g (fold)
     if (lazy .and. unfolded > 0) call fold(self, problem, g, muhat)
@@ -381,8 +383,8 @@ contains
     integer(ip) :: n
     n = problem%n
     self%w(1:n) = g(1:n) - self%g0(1:n)
-    call problem%eq_range_coefficient(self%w, self%cz)
-    call problem%eq_apply_t(self%cz, self%w)
+    call problem%face%range_coefficient(self%w, self%cz)
+    call problem%eq%apply_t(self%cz, self%w)
     g(1:n) = g(1:n) - self%w(1:n)
     muhat = muhat - self%cz
     self%g0(1:n) = g(1:n)
@@ -396,7 +398,7 @@ contains
     real(dp), intent(in) :: x(:), g(:), muhat(:), ctol
     integer(ip) :: n
     n = problem%n
-    call problem%eq_apply_t(muhat, self%w)
+    call problem%eq%apply_t(muhat, self%w)
     self%w(1:n) = g(1:n) - self%w(1:n)
     self%loose_counts = face_changes(problem, free, x, self%w, ctol)
     loose_check = sum(self%loose_counts) > 0
@@ -427,7 +429,7 @@ contains
     end if
     n = problem%n
     self%w = merge(self%r, 0.0_dp, free(1:n))
-    call problem%face_precondition(self%w, self%q)
+    call problem%face%precondition(problem%prec, self%w, self%q)
     self%n_precondition = self%n_precondition + 1
     call face_project(problem, free, self%q, self%z, self%cz)
   end subroutine precondition

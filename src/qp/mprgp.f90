@@ -101,7 +101,8 @@ module mprgp
   use text, only: lower_case
   use qp_problem, only: qp_problem_t, no_lower_bound, compensated_add, qp_status_converged, &
                         qp_status_max_hessian, qp_status_not_finite, qp_status_breakdown, &
-                        qp_status_incompatible, qp_status_not_run, qp_message_len
+                        qp_status_incompatible, qp_status_not_run, qp_message_len, x_moved, &
+                        moved_other, moved_to_argument, moved_along_argument
   use inner_solver, only: inner_solver_t, inner_stop_t
   use solver_monitor, only: step_none, step_cg, step_expansion, step_proportioning
   implicit none
@@ -319,7 +320,7 @@ contains
     mprgp_is_compatible = .false.
     if (self%a_norm <= 0) then
       reason = 'MPRGP is not initialized (call init first)'
-    else if (problem%has_equality) then
+    else if (allocated(problem%eq)) then
       reason = 'MPRGP handles bound constraints only; this problem has the equality constraint C x = 0 '// &
                '(use SMALBE)'
     else if (.not. (allocated(problem%b) .and. allocated(problem%lower))) then
@@ -387,7 +388,7 @@ contains
     self%n_best = 0
     self%n_norm_updates = 0
     self%n_preconditioner = 0
-    self%preconditioned = problem%has_preconditioner()
+    self%preconditioned = allocated(problem%prec)
     self%status = qp_status_not_run
     self%message = ''
   end subroutine reset_run
@@ -416,13 +417,13 @@ contains
     call reset_run(self, problem)
 
     if (.not. gradient_given) then
-      call problem%track_reset()
+      call x_moved(problem, moved_other)
       if (max_hessian < 1) then
         call set_status(self, qp_status_max_hessian, 'Hessian multiplication cap reached', max_hessian)
         return
       end if
       call apply_hessian(self, problem, x, g)
-      call problem%track_last()
+      call x_moved(problem, moved_to_argument)
       g(1:n) = g(1:n) - b_lin(1:n)
     end if
     call gradient_part(problem, x, g, .false., self%p)
@@ -486,7 +487,7 @@ contains
           ! CG step, then p <- phi - beta_cg p with beta_cg = phi^T A p / p^T A p
           ! (preconditioned: p <- z - beta_cg p, beta_cg = z^T A p / p^T A p)
           call take_step(problem, x, g, alpha_cg, self%p, self%ap)
-          call problem%track_step(alpha_cg)
+          call x_moved(problem, moved_along_argument, alpha_cg)
           self%n_cg = self%n_cg + 1
           last_kind = step_cg
           if (self%preconditioned) then
@@ -508,7 +509,7 @@ contains
           call self%ritz%end_run()
           ! expansion step: half step to the boundary, then the projected gradient step
           call take_step(problem, x, g, alpha_f, self%p, self%ap)
-          call problem%track_step(alpha_f)
+          call x_moved(problem, moved_along_argument, alpha_f)
           self%n_expansion = self%n_expansion + 1
           last_kind = step_expansion
           call expand(self, problem, b_lin, x, g, max_hessian)
@@ -525,7 +526,7 @@ contains
         if (.not. step_along_p(self, problem, g, .true., 'beta', 'beta^T A beta or g^T beta', 'proportioning', &
                                pap, alpha_cg)) exit
         call take_step(problem, x, g, alpha_cg, self%p, self%ap)
-        call problem%track_step(alpha_cg)
+        call x_moved(problem, moved_along_argument, alpha_cg)
         self%n_proportioning = self%n_proportioning + 1
         last_kind = step_proportioning
         call gradient_part(problem, x, g, .false., self%p)
@@ -561,8 +562,8 @@ contains
     class(mprgp_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
     switched = .false.
-    if (.not. problem%watches_condition()) return
-    call problem%condition_estimate(max(self%ritz%max_ratio, self%ritz%current_ratio()), switched)
+    if (.not. problem%prec%watches()) return
+    call problem%prec%condition(max(self%ritz%max_ratio, self%ritz%current_ratio()), switched)
     if (switched) self%n_switches = self%n_switches + 1
   end function preconditioner_switched
 
@@ -586,7 +587,7 @@ contains
     real(dp), intent(inout) :: work(:), z(:)
     integer(ip) :: i
     call gradient_part(problem, x, g, .false., work)
-    call problem%precondition(work, z)
+    call problem%prec%apply(work, z)
     do i = 1, problem%n
       if (.not. x(i) > problem%lower(i)) z(i) = 0
     end do
@@ -637,7 +638,7 @@ contains
       self%w_g(1:n) = g(1:n)
       call projected_step(problem, self%w_x, alpha_e, self%w_phi, x)
       call apply_hessian(self, problem, x, g)
-      call problem%track_last()
+      call x_moved(problem, moved_to_argument)
       g(1:n) = g(1:n) - b_lin(1:n)
       hi = 0
       lo = 0
@@ -650,19 +651,19 @@ contains
         if (max_hessian - self%n_hessian >= 1) then
           call projected_step(problem, self%w_x, self%alpha_bar, self%w_phi, x)
           call apply_hessian(self, problem, x, g)
-          call problem%track_last()
+          call x_moved(problem, moved_to_argument)
           g(1:n) = g(1:n) - b_lin(1:n)
         else
           x(1:n) = self%w_x(1:n)
           g(1:n) = self%w_g(1:n)
-          call problem%track_reset()
+          call x_moved(problem, moved_other)
         end if
       end if
     else
       self%w_x(1:n) = x(1:n)
       call projected_step(problem, self%w_x, self%alpha_bar, self%w_phi, x)
       call apply_hessian(self, problem, x, g)
-      call problem%track_last()
+      call x_moved(problem, moved_to_argument)
       g(1:n) = g(1:n) - b_lin(1:n)
     end if
   end subroutine expand
