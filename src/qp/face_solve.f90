@@ -193,21 +193,7 @@ contains
     logical :: prec, check, switched, lazy, known
 
     n = problem%n
-    call ensure_size(self%r, n)
-    call ensure_size(self%z, n)
-    call ensure_size(self%p, n)
-    call ensure_size(self%q, n)
-    call ensure_size(self%w, n)
-    call ensure_size(self%cz, size(muhat, kind=ip))
-    self%n_hessian = 0
-    self%n_steps = 0
-    self%n_precondition = 0
-    self%reached = .false.
-    self%breakdown = .false.
-    self%aborted = .false.
-    self%stopped_loose = .false.
-    self%loose_counts = 0
-    self%trusted = .false.
+    call reset_run(self, n, size(muhat, kind=ip))
     cap = max_steps
     prec = allocated(problem%prec)
     lazy = problem%face%lazy()
@@ -217,21 +203,8 @@ contains
 
     known = .false.
     if (present(g_valid)) known = g_valid
-    if (.not. known) then
-      ! 1. onto the face: x_A = l_A, then C x = 0 by the least squares correction on F
-      x(1:n) = merge(x(1:n), problem%lower(1:n), free(1:n))
-      call problem%face%coefficient(x, muhat)
-      call problem%eq%apply_t(muhat, self%w)
-      x(1:n) = x(1:n) - merge(self%w, 0.0_dp, free(1:n))
-    end if
-    call x_moved(problem, moved_other)
-
-    ! 2. PCPG
-    if (.not. known) then
-      call problem%hessian(x, g)
-      self%n_hessian = 1
-      g(1:n) = g(1:n) - problem%b(1:n)
-    end if
+    ! 1. onto the face (unless known), then 2. PCPG
+    call onto_face(self, problem, free, x, g, muhat, known)
     call face_project(problem, free, g, self%r, muhat)
     self%r = -self%r
     unfolded = 0          ! updates of g since g0 (face_lazy: the range terms in g come from them)
@@ -240,12 +213,7 @@ contains
       self%g0(1:n) = g(1:n)
     end if
     ! the directions of earlier runs (face_recycle): the Galerkin start (no product), then deflated CG
-    if (self%recycle%begin_run(problem, free)) then
-      call self%recycle%start(problem, x, g, self%r)
-      unfolded = 1
-      call face_project(problem, free, g, self%r, muhat)
-      self%r = -self%r
-    end if
+    if (galerkin_start(self, problem, free, x, g, muhat)) unfolded = 1
     self%measure0 = measure(problem, self%r, per_component)
     self%measure = self%measure0
     self%reached = self%measure <= target
@@ -323,6 +291,66 @@ contains
     muhat = -muhat
 
   end subroutine run
+
+  !> The Galerkin start from the kept directions of earlier runs, when
+  !> face_recycle has some for this face: x, g and r = -P_F g move (no
+  !> product); true when it did.
+  logical function galerkin_start(self, problem, free, x, g, muhat) result(moved)
+    class(face_polish_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    logical, intent(in) :: free(:)
+    real(dp), intent(inout) :: x(:), g(:), muhat(:)
+    moved = self%recycle%begin_run(problem, free)
+    if (.not. moved) return
+    call self%recycle%start(problem, x, g, self%r)
+    call face_project(problem, free, g, self%r, muhat)
+    self%r = -self%r
+  end function galerkin_start
+
+  !> The run's work vectors (n, and m for the coefficients) and counters.
+  subroutine reset_run(self, n, m)
+    class(face_polish_t), intent(inout) :: self
+    integer(ip), intent(in) :: n, m
+    call ensure_size(self%r, n)
+    call ensure_size(self%z, n)
+    call ensure_size(self%p, n)
+    call ensure_size(self%q, n)
+    call ensure_size(self%w, n)
+    call ensure_size(self%cz, m)
+    self%n_hessian = 0
+    self%n_steps = 0
+    self%n_precondition = 0
+    self%reached = .false.
+    self%breakdown = .false.
+    self%aborted = .false.
+    self%stopped_loose = .false.
+    self%loose_counts = 0
+    self%trusted = .false.
+  end subroutine reset_run
+
+  !> Unless `known`: x onto the face (x_A = l_A, then C x = 0 by the least
+  !> squares correction on F) and g = A x - b there (one product).
+  subroutine onto_face(self, problem, free, x, g, muhat, known)
+    class(face_polish_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    logical, intent(in) :: free(:)
+    real(dp), intent(inout) :: x(:), g(:), muhat(:)
+    logical, intent(in) :: known
+    integer(ip) :: n
+    n = problem%n
+    if (.not. known) then
+      x(1:n) = merge(x(1:n), problem%lower(1:n), free(1:n))
+      call problem%face%coefficient(x, muhat)
+      call problem%eq%apply_t(muhat, self%w)
+      x(1:n) = x(1:n) - merge(self%w, 0.0_dp, free(1:n))
+    end if
+    call x_moved(problem, moved_other)
+    if (.not. known) then
+      call problem%hessian(x, g)
+      self%n_hessian = 1
+      g(1:n) = g(1:n) - problem%b(1:n)
+    end if
+  end subroutine onto_face
 
   !> The decisions after a CG step of `run` that did not reach target: the
   !> loose check (when the measure is <= loose_at: stop if the face would

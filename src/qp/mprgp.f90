@@ -408,8 +408,8 @@ contains
     class(inner_stop_t), intent(inout) :: stop_rule
     integer(ip), intent(in) :: max_hessian
     logical, intent(in) :: gradient_given
-    real(dp) :: stats(4), gp, alpha_f, alpha_cg, pap, a_refined
-    logical :: stop, restart, conjugate_pending
+    real(dp) :: stats(4), alpha_f, alpha_cg, pap
+    logical :: restart, conjugate_pending
     integer(ip) :: n
     integer :: last_kind                   ! the kind of the last step (the rule's monitor)
 
@@ -433,38 +433,8 @@ contains
     last_kind = step_none
 
     do
-      gp = sqrt(stats(1) + stats(2))
-      self%gp_norm = gp
-      if (.not. all(ieee_is_finite(stats))) then
-        call set_status(self, qp_status_not_finite, 'non-finite value in ||g^P||', self%n_iterations)
-        exit
-      end if
-      if (gp < self%best_gp_norm) then
-        self%best_gp_norm = gp
-        self%n_best = self%n_iterations
-      end if
-      call stop_rule%observe(last_kind, self%n_hessian, gp)
-      call stop_rule%test(problem, x, g, gp, stop)
-      if (stop) then
-        call set_status(self, qp_status_converged, 'converged (stopping rule met)', self%n_iterations)
-        exit
-      end if
-      if (self%n_hessian >= max_hessian) then
-        call set_status(self, qp_status_max_hessian, 'Hessian multiplication cap reached', max_hessian)
-        exit
-      end if
-
-      if (.not. self%norm_refined) then
-        ! the first step of this MPRGP: the problem's better ||A|| (deferred
-        ! Lanczos, dual_problem%refined_norm) before alpha_bar is used
-        self%norm_refined = .true.
-        a_refined = problem%refined_norm()
-        if (a_refined > self%a_norm) then
-          self%a_norm = a_refined
-          self%alpha_bar = self%alpha_scale/self%a_norm
-          call split_stats(self, problem, x, g, stats)
-        end if
-      end if
+      if (stops_here(self, problem, x, g, stats, stop_rule, last_kind, max_hessian)) exit
+      if (.not. self%norm_refined) call refine_norm(self, problem, x, g, stats)
       if (stats(2) <= self%gamma**2*stats(3)) then
         ! proportional iterate: try a CG step along p (a new run: p = phi, or z)
         if (restart) then
@@ -536,6 +506,60 @@ contains
     end do
     call self%ritz%end_run()
   end subroutine minimize
+
+  !> At the top of an iteration of minimize (stats: split_stats at x): ||g^P||
+  !> recorded, then true (status set) when it is not finite, when the
+  !> caller's stopping rule holds or when the product cap is reached.
+  logical function stops_here(self, problem, x, g, stats, stop_rule, last_kind, max_hessian) result(done)
+    class(mprgp_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(in) :: x(:), g(:), stats(4)
+    class(inner_stop_t), intent(inout) :: stop_rule
+    integer, intent(in) :: last_kind
+    integer(ip), intent(in) :: max_hessian
+    real(dp) :: gp
+    logical :: stop
+    done = .true.
+    gp = sqrt(stats(1) + stats(2))
+    self%gp_norm = gp
+    if (.not. all(ieee_is_finite(stats))) then
+      call set_status(self, qp_status_not_finite, 'non-finite value in ||g^P||', self%n_iterations)
+      return
+    end if
+    if (gp < self%best_gp_norm) then
+      self%best_gp_norm = gp
+      self%n_best = self%n_iterations
+    end if
+    call stop_rule%observe(last_kind, self%n_hessian, gp)
+    call stop_rule%test(problem, x, g, gp, stop)
+    if (stop) then
+      call set_status(self, qp_status_converged, 'converged (stopping rule met)', self%n_iterations)
+      return
+    end if
+    if (self%n_hessian >= max_hessian) then
+      call set_status(self, qp_status_max_hessian, 'Hessian multiplication cap reached', max_hessian)
+      return
+    end if
+    done = .false.
+  end function stops_here
+
+  !> The first step of this MPRGP: the problem's better ||A|| (deferred
+  !> Lanczos, dual_problem%refined_norm) before alpha_bar is used; stats
+  !> again with the new alpha_bar.
+  subroutine refine_norm(self, problem, x, g, stats)
+    class(mprgp_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(in) :: x(:), g(:)
+    real(dp), intent(inout) :: stats(4)
+    real(dp) :: a_refined
+    self%norm_refined = .true.
+    a_refined = problem%refined_norm()
+    if (a_refined > self%a_norm) then
+      self%a_norm = a_refined
+      self%alpha_bar = self%alpha_scale/self%a_norm
+      call split_stats(self, problem, x, g, stats)
+    end if
+  end subroutine refine_norm
 
   !> After a CG step: p <- d - beta_cg p on the free set (d = phi, or z when
   !> preconditioned), beta_cg recorded for the Ritz values. .false. (status
