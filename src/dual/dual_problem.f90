@@ -31,7 +31,7 @@
 !> 'auto' (set_preconditioner with a switch threshold kappa_s): M^{-1} starts
 !> as 'lumped'; MPRGP reports the running Ritz estimate of the condition of
 !> R_F M_A^{-1} R_F A after every preconditioned CG step
-!> (qp_problem: condition_estimate; the same on every rank), and the first
+!> (the part prec: condition; the same on every rank), and the first
 !> time it exceeds kappa_s the Dirichlet M^{-1} is set up (once) and used
 !> from then on (MPRGP restarts its CG direction). `switch_at` is the count
 !> of Hessian products (hessian and face_operator calls) at the switch,

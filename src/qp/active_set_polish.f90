@@ -8,7 +8,7 @@
 !> SMALBE's n_hessian. When the active set was the right one, the next outer
 !> iteration's test accepts the pair at once; otherwise SMALBE goes on from
 !> it (a feasible warm start: SMALBE's Lagrangian test is not applied to that
-!> step). Needs a problem with a face solver (qp_problem: has_face_solver).
+!> step). Needs a problem with a face solver (qp_problem: the part `face`).
 !>
 !> One polish is up to `rounds` face solves (polish_step): a face solve whose
 !> x leaves a bound on a free row is projected and the new face solved at
@@ -35,7 +35,7 @@
 !> (docs/THEORY.md "Polish robustness").
 !> `first`: before SMALBE's first outer iteration, the polish rounds from the
 !> face on which every bounded row is at its bound, where the problem knows
-!> its equality rows alone to fix it (face_always_regular).
+!> its equality rows alone to fix it (face%regular()).
 !> Timer 'polish' (a part of 'solve').
 module active_set_polish
   use kinds, only: dp, ip, i8, name_len, MPI_INT_IP, MPI_INT_I8

@@ -11,14 +11,14 @@
 !> linear one on Im P_F, solved by projected preconditioned CG (PCPG):
 !> 1. start: x_A := l_A, then x_F -= C_F^T (C_F C_F^T)^{-1} C x (C x = 0);
 !> 2. r = -P_F g, g = A x - b, z = P_F M_F^{-1} r (M^{-1} the problem's
-!>    face_precondition on the rows F, or none), standard CG recurrences; the
-!>    gradient g follows each step (g <- g + alpha q, q = face_operator(p)
-!>    = A p), r is projected anew. A problem with face_lazy() gives instead
-!>    q = face_operator_lazy(p) = A p + C^T c: g then carries terms of the
+!>    face%precondition on the rows F, or none), standard CG recurrences; the
+!>    gradient g follows each step (g <- g + alpha q, q = face%apply(p)
+!>    = A p), r is projected anew. A face with lazy() gives instead
+!>    q = face%apply_lazy(p) = A p + C^T c: g then carries terms of the
 !>    range of C^T, which P_F removes from r and which cancel in the
 !>    Lagrangian gradient g + C^T mu of the loose checks (mu follows g); every
 !>    lazy_fold steps and at the end they leave g (`fold`: one
-!>    eq_range_coefficient of the change of g since the last fold);
+!>    face%range_coefficient of the change of g since the last fold);
 !> 3. stop when the stopping measure of r (the problem's weighted maximum
 !>    with a per-component test, else ||r||) is <= target, or after max_steps
 !>    steps, or (`aborted`) after abort_check steps or more when the mean
@@ -30,7 +30,7 @@
 !> step 2 are skipped.
 !> The multiplier that makes the face's KKT conditions hold in the least
 !> squares sense is mu = -(C_F C_F^T)^{-1} C_F g_F (returned in the form
-!> eq_apply_t takes, `muhat`), so that g + C^T mu = P_F g on F.
+!> eq%apply_t takes, `muhat`), so that g + C^T mu = P_F g on F.
 !> On Im P_F, C p = 0, so A p = A_0 p (the penalty rho C^T C drops out) and
 !> P_F A_0 = P_F F for the FETI dual (P_F kills Im G^T): the face problem is
 !> the same with or without the penalty and the FETI projector P.
@@ -53,7 +53,7 @@
 !> lie in its face: a Galerkin start after step 1, deflated CG in step 2
 !> (module face_recycle; no Hessian products).
 !> The problem provides C_F C_F^T through qp_problem's face hooks
-!> (face_init, face_coefficient). Every routine is collective.
+!> (face%init, face%coefficient). Every routine is collective.
 module face_solve
   use kinds, only: dp, ip, MPI_INT_IP
   use qp_problem, only: qp_problem_t, no_lower_bound, x_moved, moved_other
@@ -146,7 +146,7 @@ contains
   end function face_changes
 
   !> py = P_F y (y restricted to F first; py may not be y); c: the
-  !> coefficients of C_F^T (C_F C_F^T)^{-1} C_F y_F (eq_size). Collective.
+  !> coefficients of C_F^T (C_F C_F^T)^{-1} C_F y_F (eq%size()). Collective.
   subroutine face_project(problem, free, y, py, c)
     class(qp_problem_t), intent(inout) :: problem
     logical, intent(in) :: free(:)
@@ -163,7 +163,7 @@ contains
     py(1:n) = merge(w - py(1:n), 0.0_dp, free(1:n))
   end subroutine face_project
 
-  !> PCPG on the face of `free` (face_init(free) already called) from x;
+  !> PCPG on the face of `free` (face%init(free) already called) from x;
   !> on return x is on the face (x_A = l_A, C x = 0 up to the coarse solves),
   !> g = A x - b (without multiplier) and muhat the face multiplier (see the
   !> module). per_component: measure r by problem%weighted_max, else ||r||.

@@ -64,7 +64,7 @@
 !>
 !> Preconditioning in the face (Dostal, "Optimal Quadratic Programming
 !> Algorithms", 2009, Sec. 5.11): when the problem has a preconditioner
-!> (qp_problem: has_preconditioner, precondition), the CG steps use
+!> (qp_problem: the part `prec`), the CG steps use
 !> z = R_F M_A^{-1} R_F g, the preconditioned free gradient restricted to
 !> the free set (0 on the active set), instead of phi: a run of CG steps
 !> starts with p = z, conjugates with beta_cg = z^T A p / p^T A p and
@@ -86,7 +86,7 @@
 !> values and the largest ratio theta_max/theta_min of a run, over the
 !> calls since the caller reset it (SMALBE: one solve). Without
 !> preconditioner the operator is A on the face, with it R_F M_A^{-1} R_F A.
-!> A problem that watches it (qp_problem: watches_condition; the FETI dual
+!> A problem that watches it (qp_preconditioner: watches; the FETI dual
 !> with `&solver preconditioner = 'auto'`) is handed the running estimate
 !> after every preconditioned CG step and may change its preconditioner;
 !> then the next CG step starts a new run (p = z), as after a face change.

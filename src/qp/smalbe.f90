@@ -13,8 +13,8 @@
 !>
 !> and the inner problem of outer iteration k is the bound constrained QP
 !> with Hessian A and linear term b - C^T mu_k. mu is carried in hat form
-!> (see qp_problem): C^T mu = eq_apply_t(muhat), and mu <- mu + rho C x is
-!> muhat <- muhat + rho z with z from eq_residual.
+!> (see qp_problem): C^T mu = eq%apply_t(muhat), and mu <- mu + rho C x is
+!> muhat <- muhat + rho z with z from eq%residual.
 !>
 !> Outer iteration k (M_0 = m_scale ||A||, eta = eta_scale ||b||):
 !> 1. x_k: the inner solver from x_{k-1} (warm start, the gradient updated
@@ -57,7 +57,7 @@
 !> decided by round-off.
 !> When b = 0, ||b|| is replaced by 1 in tol ||b|| and eta.
 !>
-!> ||C x|| costs one eq_residual (for FETI: one coarse problem solve). The
+!> ||C x|| costs one eq%residual (for FETI: one coarse problem solve). The
 !> inner stopping rule evaluates it only when ||g^P|| <= max(eta, tol ||b||),
 !> since otherwise neither inner criterion can hold (counted in n_eq_residual).
 !>
@@ -176,8 +176,8 @@ module smalbe
     real(dp) :: rho_initial = 0                !< problem%eq%penalty() at the start of the last solve
     integer(ip) :: n_rho_updates = 0           !< times rho was raised
     ! results of the last solve
-    real(dp), allocatable :: muhat(:)          !< final multiplier, hat form (C^T mu = eq_apply_t(muhat))
-    !> when allocated with eq_size entries, the next solve starts from this
+    real(dp), allocatable :: muhat(:)          !< final multiplier, hat form (C^T mu = eq%apply_t(muhat))
+    !> when allocated with eq%size() entries, the next solve starts from this
     !> multiplier instead of 0 (and deallocates it): a warm start
     real(dp), allocatable :: muhat_start(:)
     real(dp) :: cnorm = 0                      !< ||C x|| at the returned x
@@ -303,7 +303,7 @@ contains
   end subroutine inner_stop_observe
 
   !> gp_measure and eq_measure at x (g the gradient there; z and cnorm of
-  !> eq_residual at x already computed). Classical: ||g^P|| and ||C x||.
+  !> eq%residual at x already computed). Classical: ||g^P|| and ||C x||.
   !> Per-component: max_i w_i |v^P_i| with v = g - rho C^T C x, the gradient
   !> without its penalty part (for the FETI dual: the constraint violation of
   !> the displacements the multipliers define), and problem%eq_measure.
@@ -906,7 +906,7 @@ contains
   !> rho_contraction^w ||C x_{k-w}||; w = 1: the last one), at least w outer
   !> iterations after the last raise and after an inner solve that made a
   !> step, rho <- rho_growth rho (at most smalbe_rho_cap rho_0). A gains (rho - rho_old) C^T C, so does the
-  !> gradient at x_k (no Hessian product: C^T C x = eq_apply_t(z)); the
+  !> gradient at x_k (no Hessian product: C^T C x = eq%apply_t(z)); the
   !> inner ||A|| estimate becomes max(||A||, rho) (A_0 and C^T C act on
   !> complementary subspaces). L(x_k, mu_{k+1}) grows by
   !> (rho - rho_old)/2 ||C x_k||^2, which the next test of step 4 includes.
