@@ -2,7 +2,7 @@
 """Run two feticontact binaries on the same inputs and compare the results exactly.
 
     tools/compare_runs.py BIN_A BIN_B INPUT.nml [INPUT.nml ...] [--ranks 2] [--work DIR]
-                          [--renamed /case/GROUP/OLD=/case/GROUP/NEW ...]
+                          [--renamed /case/GROUP/OLD=/case/GROUP/NEW ...] [--keep-a] [--only-a]
 
 Each input is run by both binaries (`mpirun --bind-to none -n RANKS`) into its
 own output directory (the `&output directory` of the input is replaced). Then
@@ -15,6 +15,8 @@ own output directory (the `&output directory` of the input is replaced). Then
 - every HDF5 dataset of the run must be bit-identical (numpy.array_equal on
   the raw arrays, NaN included).
 Prints one line per input and exits 1 if any differs.
+--keep-a reuses the runs of BIN_A already in the work folder (a baseline run
+once, e.g. by --only-a, which runs BIN_A alone and compares nothing).
 """
 import argparse
 import json
@@ -64,7 +66,11 @@ def with_directory(text, directory):
     return text[:span[0]] + body + text[span[1]:]
 
 
-def run(binary, nml, outdir, ranks):
+def run(binary, nml, outdir, ranks, keep=False):
+    done = os.path.join(outdir, 'exit_code.txt')
+    if keep and os.path.exists(done):
+        with open(done) as f:
+            return int(f.read())
     os.makedirs(outdir, exist_ok=True)
     with open(nml) as f:
         text = f.read()
@@ -74,6 +80,8 @@ def run(binary, nml, outdir, ranks):
     cmd = ['mpirun', '--bind-to', 'none', '-n', str(ranks), binary, case]
     with open(os.path.join(outdir, 'log.txt'), 'w') as log:
         rc = subprocess.call(cmd, stdout=log, stderr=subprocess.STDOUT)
+    with open(done, 'w') as f:
+        f.write('%d\n' % rc)
     return rc
 
 
@@ -147,13 +155,21 @@ def main():
     ap.add_argument('--renamed', action='append', default=[], metavar='OLD=NEW',
                     help='a report.json key that binary B renamed, e.g. /case/solver/power_iterations='
                          '/case/solver/lanczos_steps (repeatable)')
+    ap.add_argument('--keep-a', action='store_true', help='reuse the runs of BIN_A already in --work')
+    ap.add_argument('--only-a', action='store_true', help='run BIN_A alone (a baseline for --keep-a)')
     args = ap.parse_args()
     bad = 0
     for nml in args.inputs:
         name = os.path.splitext(os.path.basename(nml))[0]
         sub = os.path.basename(os.path.dirname(os.path.abspath(nml)))
         dirs = [os.path.join(args.work, sub + '_' + name, tag) for tag in ('a', 'b')]
-        rcs = [run(os.path.abspath(b), nml, d, args.ranks) for b, d in zip((args.bin_a, args.bin_b), dirs)]
+        if args.only_a:
+            rc = run(os.path.abspath(args.bin_a), nml, dirs[0], args.ranks, args.keep_a)
+            print('%-40s baseline run (exit %d)' % (sub + '/' + name, rc))
+            sys.stdout.flush()
+            continue
+        rcs = [run(os.path.abspath(args.bin_a), nml, dirs[0], args.ranks, args.keep_a),
+               run(os.path.abspath(args.bin_b), nml, dirs[1], args.ranks)]
         diffs = []
         if rcs[0] != rcs[1]:
             diffs.append('exit codes %d != %d' % tuple(rcs))

@@ -40,6 +40,24 @@ module load_history
 
   public :: run_load_history
 
+  !> What a history run keeps from its set-up to its end.
+  type :: history_run_t
+    type(MPI_Comm) :: comm
+    integer :: rank = 0, nranks = 1
+    type(tfeti_dualization_t) :: dual
+    type(feti_t), pointer :: op => null()
+    type(smalbe_t) :: solver
+    type(dual_solution_t) :: sol
+    type(contact_summary_t) :: contact
+    type(checkpoint_t) :: ck
+    type(step_record_t), allocatable :: records(:)
+    type(warm_state_t) :: warm                  !< the last solutions, for the next start
+    real(dp), allocatable :: nu(:), work(:)
+    real(dp) :: last_seconds(3) = 0             !< the last step's solve seconds (report.json)
+    real(dp) :: t_start = 0
+    integer(i8) :: fingerprint(2) = 0
+  end type history_run_t
+
   !> How a step's solve started (step_record_t%warm)
   character(len=12), parameter :: start_names(0:3) = [character(len=12) :: 'cold', 'previous', 'scaled', &
                                                        'extrapolated']
@@ -53,152 +71,193 @@ contains
     type(params_t), intent(in) :: p
     type(MPI_Comm), intent(in) :: comm
     integer, intent(out) :: status
-    type(tfeti_dualization_t), target :: dual
-    type(feti_t), pointer :: op
-    type(smalbe_t) :: solver
-    type(dual_solution_t) :: sol
-    type(contact_summary_t) :: contact
-    type(timer_stat_t), allocatable :: stats(:)
-    type(checkpoint_t) :: ck
-    type(step_record_t), allocatable :: records(:)
-    type(warm_state_t) :: warm
-    real(dp), allocatable :: nu(:), work(:), muhat0(:)
-    real(dp) :: seconds(3), last_seconds(3), t_start
-    integer(i8) :: fingerprint(2)
+    type(history_run_t), target :: h
+    type(step_record_t) :: rec
     integer(ip) :: step, first
-    integer :: ierr, rank, nranks, stop_flag
-    character(len=300) :: line
 
-    call MPI_Comm_rank(comm, rank, ierr)
-    call MPI_Comm_size(comm, nranks, ierr)
+    h%comm = comm
+    call start_history(p, h, first)
+    status = 0
+    do step = first, p%history%nsteps
+      call solve_step(p, h, step, rec)
+      status = step_status(p, h, rec)
+      if (status /= 0) exit
+      if (stopped_after(p, h, step)) exit
+    end do
+    call memory_mark('history')
+    call timer_stop('total')
+    call finish_history(p, h, status)
+  end subroutine run_load_history
+
+  !> The set-up of a history: the output folder, the stop signal, one
+  !> dual set-up for every step, and (restart) the checkpoint; `first`: the
+  !> first step to solve.
+  subroutine start_history(p, h, first)
+    type(params_t), intent(in) :: p
+    type(history_run_t), intent(inout), target :: h
+    integer(ip), intent(out) :: first
+    integer :: ierr
+    character(len=300) :: line
+    call MPI_Comm_rank(h%comm, h%rank, ierr)
+    call MPI_Comm_size(h%comm, h%nranks, ierr)
     if (p%output%write_hdf5 .or. p%output%write_report .or. p%history%checkpoint) &
-      call check_output_directory(comm, p%output%directory)
+      call check_output_directory(h%comm, p%output%directory)
     call install_stop_signal()
-    call MPI_Barrier(comm, ierr)
-    t_start = MPI_Wtime()
+    call MPI_Barrier(h%comm, ierr)
+    h%t_start = MPI_Wtime()
     call timer_start('total')
-    call dual%setup(feti_settings_of(p), p%solver%dual, p%solver%preconditioner, p%reconstruction, comm)
-    call dual%prepare_history()
+    call h%dual%setup(feti_settings_of(p), p%solver%dual, p%solver%preconditioner, p%reconstruction, h%comm)
+    call h%dual%prepare_history()
     call memory_mark('dual QP setup')
-    op => dual%operators()
-    fingerprint = history_fingerprint(p, op, nranks)
-    allocate (records(0))
+    h%op => h%dual%operators()
+    h%fingerprint = history_fingerprint(p, h%op, h%nranks)
+    allocate (h%records(0))
     first = 1
-    allocate (warm%lambda(op%n_own(), 2), warm%muhat(op%n_coarse(), 2))
-    warm%lambda = 0
-    warm%muhat = 0
+    allocate (h%warm%lambda(h%op%n_own(), 2), h%warm%muhat(h%op%n_coarse(), 2))
+    h%warm%lambda = 0
+    h%warm%muhat = 0
     if (p%history%restart) then
-      call restart_from(p, comm, rank, nranks, op, dual, fingerprint, ck, solver%polish%face%recycle)
-      records = ck%records
-      warm = ck%warm
-      first = ck%step + 1
-      write (line, '(a,i0,a,i0)') 'history: restart after step ', ck%step, ' of ', p%history%nsteps
+      call restart_from(p, h%comm, h%rank, h%nranks, h%op, h%dual, h%fingerprint, h%ck, &
+                        h%solver%kept_directions())
+      h%records = h%ck%records
+      h%warm = h%ck%warm
+      first = h%ck%step + 1
+      write (line, '(a,i0,a,i0)') 'history: restart after step ', h%ck%step, ' of ', p%history%nsteps
       call log_message(trim(line))
     end if
-    allocate (nu(op%n_own()), work(op%n_own()))
-    last_seconds = 0
-    status = 0
+    allocate (h%nu(h%op%n_own()), h%work(h%op%n_own()))
+    h%last_seconds = 0
     call log_section('Load history')
     write (line, '(a,i0,3a,es10.3,a,l1)') 'steps ', p%history%nsteps, ', path ', trim(p%history%path), &
       ', factor_peak ', p%history%factor_peak, ', warm start ', p%history%warm_start
     call log_message(trim(line))
+  end subroutine start_history
 
-    do step = first, p%history%nsteps
-      block
-        type(step_record_t) :: rec
-        real(dp) :: t0, before(5)
-        t0 = MPI_Wtime()
-        before = [timer_seconds('rec new'), timer_seconds('rec standard'), timer_seconds('primal'), &
-                  timer_seconds('kkt'), timer_seconds('step rhs')]
-        rec%step = step
-        rec%factor = p%history%factor(step)
-        rec%gap = p%history%gap(step, p%obstacle%gap)
-        call log_section('Step '//str(step))
-        ! 1. the right-hand sides of the step
-        call timer_start('step rhs')
-        call dual%set_load(rec%factor, rec%gap - p%obstacle%gap)
-        call timer_stop('step rhs')
-        ! 2. the solve, warm started (warm_guess; nu = P lambda0, P lambda~ = 0, which SMALBE projects
-        ! onto nu >= -lambda~)
-        call solver%init(p%solver%smalbe, dual%hessian_norm())
-        ! warm: the face CG directions of the earlier steps start this step's face solves (F is the
-        ! same in every step; face_recycle)
-        solver%polish%face%recycle%on = p%history%warm_start .and. p%history%recycle
-        nu = 0
-        if (warm%n > 0 .and. p%history%warm_start) then
-          call warm_guess(warm, rec%factor, rec%gap, work, muhat0, rec%warm)
-          call op%project(work, nu)
-          ! contact rows without force in the guess exactly at their bound (lambda = 0), not a
-          ! rounding error above it: their face is that of the guess
-          where (op%is_contact() .and. work <= 0) nu = op%lower_bounds()
-          solver%muhat_start = muhat0
-        end if
-        call dual%solve_from(solver, nu, seconds)
-        last_seconds = seconds
-        ! 3. the inverse: lambda, alpha_bar, u, KKT
-        call dual%post_solve(nu, solver%muhat, sol)
-        call summarize_contact(op, sol%lambda, p%reconstruction%active_tol, contact)
-        call fill_record(rec, contact, solver, sol, p%reconstruction%kkt_tol)
-        ! 4. output of the step
-        call timer_start('output')
-        if (p%output%write_hdf5) call write_step_fields(p, op, sol, contact, step, comm, rank)
-        call timer_stop('output')
-        rec%seconds = [timer_seconds('step rhs') - before(5), seconds(1), timer_seconds('rec new') - before(1), &
-                       timer_seconds('rec standard') - before(2), timer_seconds('primal') - before(3), &
-                       timer_seconds('kkt') - before(4), MPI_Wtime() - t0]
-        call MPI_Allreduce(MPI_IN_PLACE, rec%seconds, size(rec%seconds), MPI_REAL_DP, MPI_MAX, comm, ierr)
-        records = [records, rec]
-        call log_step(rec, p%history%nsteps)
-        call remember(warm, rec%factor, rec%gap, sol%lambda, solver%muhat)
-        ! 5. a failed step stops the history
-        if (rec%converged == 0) then
-          write (line, '(a,i0,a,es10.3,2a)') 'feticontact: step ', step, ' (load factor ', rec%factor, &
-            '): the dual solver did not converge: ', trim(solver%message)
-          call log_message(trim(line))
-          status = exit_not_converged
-        else if (rec%kkt_passed == 0) then
-          write (line, '(a,i0,a,es10.3,3a,es10.3,a,es10.3)') 'feticontact: step ', step, ' (load factor ', &
-            rec%factor, '): KKT check failed: largest residual (', sol%kkt%worst_name(), ') ', &
-            sol%kkt%worst(), ' > kkt_tol ', p%reconstruction%kkt_tol
-          call log_message(trim(line))
-          status = exit_kkt_failed
-        end if
-        if (status /= 0) exit
-        ! 6. the checkpoint, then a time limit or a stop signal ends the run here
-        if (p%history%checkpoint) then
-          ck%fingerprint = fingerprint
-          ck%step = step
-          ck%switched = merge(1, 0, dual%preconditioner_switched())
-          ck%warm = warm
-          ck%records = records
-          call save_checkpoint(p, comm, rank, nranks, ck, solver%polish%face%recycle)
-        end if
-        stop_flag = 0
-        if (stop_requested()) stop_flag = 1
-        if (p%history%time_limit > 0 .and. MPI_Wtime() - t_start > p%history%time_limit) stop_flag = 2
-        call MPI_Allreduce(MPI_IN_PLACE, stop_flag, 1, MPI_INTEGER, MPI_MAX, comm, ierr)
-        if (stop_flag > 0 .and. step < p%history%nsteps) then
-          write (line, '(a,i0,a,i0,3a)') 'history: stopped after step ', step, ' of ', p%history%nsteps, ' (', &
-            trim(merge('stop signal         ', '&history time_limit ', stop_flag == 1)), &
-            '); continue with &history restart = .true.'
-          call log_message(trim(line))
-          exit
-        end if
-      end block
-    end do
-    call memory_mark('history')
-    call timer_stop('total')
-    call timers_reduce(comm, stats)
+  !> Step `step`: its right-hand sides, the warm-started solve, the inverse
+  !> (lambda, alpha_bar, u, KKT), the contact summary, its fields and its
+  !> record (appended to h%records, logged).
+  subroutine solve_step(p, h, step, rec)
+    type(params_t), intent(in) :: p
+    type(history_run_t), intent(inout), target :: h
+    integer(ip), intent(in) :: step
+    type(step_record_t), intent(out) :: rec
+    real(dp) :: t0, before(5), seconds(3)
+    real(dp), allocatable :: muhat0(:)
+    integer :: ierr
+    t0 = MPI_Wtime()
+    before = [timer_seconds('rec new'), timer_seconds('rec standard'), timer_seconds('primal'), &
+              timer_seconds('kkt'), timer_seconds('step rhs')]
+    rec%step = step
+    rec%factor = p%history%factor(step)
+    rec%gap = p%history%gap(step, p%obstacle%gap)
+    call log_section('Step '//str(step))
+    ! 1. the right-hand sides of the step
+    call timer_start('step rhs')
+    call h%dual%set_load(rec%factor, rec%gap - p%obstacle%gap)
+    call timer_stop('step rhs')
+    ! 2. the solve, warm started (warm_guess; nu = P lambda0, P lambda~ = 0, which SMALBE projects
+    ! onto nu >= -lambda~)
+    call h%solver%init(p%solver%smalbe, h%dual%hessian_norm())
+    ! warm: the face CG directions of the earlier steps start this step's face solves (F is the
+    ! same in every step; face_recycle)
+    call h%solver%recycle_directions(p%history%warm_start .and. p%history%recycle)
+    h%nu = 0
+    if (h%warm%n > 0 .and. p%history%warm_start) then
+      call warm_guess(h%warm, rec%factor, rec%gap, h%work, muhat0, rec%warm)
+      call h%op%project(h%work, h%nu)
+      ! contact rows without force in the guess exactly at their bound (lambda = 0), not a
+      ! rounding error above it: their face is that of the guess
+      where (h%op%is_contact() .and. h%work <= 0) h%nu = h%op%lower_bounds()
+      call h%solver%warm_start(muhat0)
+    end if
+    call h%dual%solve_from(h%solver, h%nu, seconds)
+    h%last_seconds = seconds
+    ! 3. the inverse: lambda, alpha_bar, u, KKT
+    call h%dual%post_solve(h%nu, h%solver%muhat, h%sol)
+    call summarize_contact(h%op, h%sol%lambda, p%reconstruction%active_tol, h%contact)
+    call fill_record(rec, h%contact, h%solver, h%sol, p%reconstruction%kkt_tol)
+    ! 4. output of the step
+    call timer_start('output')
+    if (p%output%write_hdf5) call write_step_fields(p, h%op, h%sol, h%contact, step, h%comm, h%rank)
+    call timer_stop('output')
+    rec%seconds = [timer_seconds('step rhs') - before(5), seconds(1), timer_seconds('rec new') - before(1), &
+                   timer_seconds('rec standard') - before(2), timer_seconds('primal') - before(3), &
+                   timer_seconds('kkt') - before(4), MPI_Wtime() - t0]
+    call MPI_Allreduce(MPI_IN_PLACE, rec%seconds, size(rec%seconds), MPI_REAL_DP, MPI_MAX, h%comm, ierr)
+    h%records = [h%records, rec]
+    call log_step(rec, p%history%nsteps)
+    call remember(h%warm, rec%factor, rec%gap, h%sol%lambda, h%solver%muhat)
+  end subroutine solve_step
+
+  !> 5. A failed step stops the history: its status (0: the step converged
+  !> and passed the KKT check), the reason logged.
+  integer function step_status(p, h, rec) result(status)
+    type(params_t), intent(in) :: p
+    type(history_run_t), intent(in) :: h
+    type(step_record_t), intent(in) :: rec
+    character(len=300) :: line
+    status = 0
+    if (rec%converged == 0) then
+      write (line, '(a,i0,a,es10.3,2a)') 'feticontact: step ', rec%step, ' (load factor ', rec%factor, &
+        '): the dual solver did not converge: ', trim(h%solver%message)
+      call log_message(trim(line))
+      status = exit_not_converged
+    else if (rec%kkt_passed == 0) then
+      write (line, '(a,i0,a,es10.3,3a,es10.3,a,es10.3)') 'feticontact: step ', rec%step, ' (load factor ', &
+        rec%factor, '): KKT check failed: largest residual (', h%sol%kkt%worst_name(), ') ', &
+        h%sol%kkt%worst(), ' > kkt_tol ', p%reconstruction%kkt_tol
+      call log_message(trim(line))
+      status = exit_kkt_failed
+    end if
+  end function step_status
+
+  !> 6. The checkpoint of step `step`, then whether a time limit or a stop
+  !> signal ends the run here (before the last step). Collective.
+  logical function stopped_after(p, h, step) result(stopped)
+    type(params_t), intent(in) :: p
+    type(history_run_t), intent(inout), target :: h
+    integer(ip), intent(in) :: step
+    integer :: stop_flag, ierr
+    character(len=300) :: line
+    if (p%history%checkpoint) then
+      h%ck%fingerprint = h%fingerprint
+      h%ck%step = step
+      h%ck%switched = merge(1, 0, h%dual%preconditioner_switched())
+      h%ck%warm = h%warm
+      h%ck%records = h%records
+      call save_checkpoint(p, h%comm, h%rank, h%nranks, h%ck, h%solver%kept_directions())
+    end if
+    stop_flag = 0
+    if (stop_requested()) stop_flag = 1
+    if (p%history%time_limit > 0 .and. MPI_Wtime() - h%t_start > p%history%time_limit) stop_flag = 2
+    call MPI_Allreduce(MPI_IN_PLACE, stop_flag, 1, MPI_INTEGER, MPI_MAX, h%comm, ierr)
+    stopped = stop_flag > 0 .and. step < p%history%nsteps
+    if (stopped) then
+      write (line, '(a,i0,a,i0,3a)') 'history: stopped after step ', step, ' of ', p%history%nsteps, ' (', &
+        trim(merge('stop signal         ', '&history time_limit ', stop_flag == 1)), &
+        '); continue with &history restart = .true.'
+      call log_message(trim(line))
+    end if
+  end function stopped_after
+
+  !> The end of a history: the timing table, the summary, report.json (the
+  !> last step's solve and solution with every step's record).
+  subroutine finish_history(p, h, status)
+    type(params_t), intent(in) :: p
+    type(history_run_t), intent(inout), target :: h
+    integer, intent(in) :: status
+    type(timer_stat_t), allocatable :: stats(:)
+    call timers_reduce(h%comm, stats)
     call log_section('Timings [s] (min / max / mean over ranks)')
     call print_timing_table(stats)
-    call log_history_summary(records)
-    if (p%output%write_report .and. size(records) > 0 .and. allocated(sol%lambda)) &
-      call write_run_report(run_case_of(p), p%output, p%reconstruction, dual, solver, sol, contact, stats, &
-                                                  last_seconds, history_json(records))
+    call log_history_summary(h%records)
+    if (p%output%write_report .and. size(h%records) > 0 .and. allocated(h%sol%lambda)) &
+      call write_run_report(run_case_of(p), p%output, p%reconstruction, h%dual, h%solver, h%sol, h%contact, &
+                            stats, h%last_seconds, history_json(h%records))
     if (status == 0) call log_message('feticontact: history done, every step converged, KKT check passed')
     call log_where_to_look(p%output, p%obstacle%shape == 'sphere')
-    call dual%free()
-  end subroutine run_load_history
+    call h%dual%free()
+  end subroutine finish_history
 
   !> The step's contact summary, solver counts and KKT outcome into its record.
   subroutine fill_record(rec, contact, solver, sol, kkt_tol)
@@ -213,8 +272,7 @@ contains
     rec%active_nodes = contact%active_nodes
     rec%outer = solver%n_outer
     rec%hessian = solver%n_hessian
-    rec%faces_reused = solver%polish%n_faces_reused
-    rec%recycled = solver%polish%n_recycled
+    call solver%reuse_counts(rec%faces_reused, rec%recycled)
     rec%kkt_worst = sol%kkt%worst()
     rec%alpha_difference = sol%alpha_difference
     rec%converged = merge(1, 0, solver%converged())

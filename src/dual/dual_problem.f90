@@ -31,7 +31,7 @@
 !> 'auto' (set_preconditioner with a switch threshold kappa_s): M^{-1} starts
 !> as 'lumped'; MPRGP reports the running Ritz estimate of the condition of
 !> R_F M_A^{-1} R_F A after every preconditioned CG step
-!> (qp_problem: condition_estimate; the same on every rank), and the first
+!> (the part prec: condition; the same on every rank), and the first
 !> time it exceeds kappa_s the Dirichlet M^{-1} is set up (once) and used
 !> from then on (MPRGP restarts its CG direction). `switch_at` is the count
 !> of Hessian products (hessian and face_operator calls) at the switch,
@@ -48,6 +48,9 @@ module dual_problem
   use kinds, only: dp, ip, i8, MPI_REAL_DP
   use errors, only: fatal_error
   use qp_problem, only: qp_problem_t, no_lower_bound
+  use qp_equality, only: qp_equality_t, moved_other, moved_to_argument, moved_along_argument
+  use qp_preconditioner, only: qp_preconditioner_t
+  use qp_face, only: qp_face_t
   use feti_operators, only: feti_t, local_field_t
   use subdomain, only: subdomain_t
   use reconstruction, only: alpha_new, active_coarse_solve
@@ -72,7 +75,7 @@ module dual_problem
     !> smallest force scale / E of eq_measure: the forces a displacement of the
     !> data's size makes, max_s max|K_s| / E_s x (stop_scale s)
     real(dp), private :: force_floor = 0
-    type(dual_preconditioner_t) :: prec        !< M^{-1} (when use_prec)
+    type(dual_preconditioner_t) :: m_inv       !< M^{-1} (when use_prec)
     logical :: use_prec = .false.
     real(dp) :: prec_q_weight = 1              !< sigma: M_A^{-1} A = sigma on Im Q
     !> 'auto': lumped until the face condition estimate exceeds switch_kappa
@@ -110,6 +113,7 @@ module dual_problem
     procedure :: track_last
     procedure :: track_step
     procedure :: track_reset
+    procedure :: make_parts
     procedure :: unscaled_multiplier
     procedure :: set_preconditioner
     procedure :: has_preconditioner
@@ -133,12 +137,49 @@ module dual_problem
     procedure :: free
   end type dual_problem_t
 
+  !> The parts of the QP (qp_problem: eq, prec, face) that the dual problem
+  !> hands the solvers: each forwards to the procedures of its owner of the
+  !> same role (the owner, a target, outlives them: its free releases them).
+  type, extends(qp_equality_t) :: dual_equality_t
+    class(dual_problem_t), pointer :: owner => null()
+  contains
+    procedure :: size => eq_part_size
+    procedure :: residual => eq_part_residual
+    procedure :: apply_t => eq_part_apply_t
+    procedure :: penalty => eq_part_penalty
+    procedure :: set_penalty => eq_part_set_penalty
+    procedure :: measure => eq_part_measure
+    procedure :: moved => eq_part_moved
+  end type dual_equality_t
+
+  type, extends(qp_preconditioner_t) :: dual_m_inverse_t
+    class(dual_problem_t), pointer :: owner => null()
+  contains
+    procedure :: apply => prec_part_apply
+    procedure :: watches => prec_part_watches
+    procedure :: condition => prec_part_condition
+  end type dual_m_inverse_t
+
+  type, extends(qp_face_t) :: dual_face_t
+    class(dual_problem_t), pointer :: owner => null()
+  contains
+    procedure :: init => face_part_init
+    procedure :: coefficient => face_part_coefficient
+    procedure :: apply => face_part_apply
+    procedure :: release => face_part_release
+    procedure :: precondition => face_part_precondition
+    procedure :: regular => face_part_regular
+    procedure :: lazy => face_part_lazy
+    procedure :: apply_lazy => face_part_apply_lazy
+    procedure :: range_coefficient => face_part_range_coefficient
+  end type dual_face_t
+
 contains
 
   !> The problem of `op` (set up) with rho = rho_scale * ||P F P||.
   !> `stopping`: &solver stopping, 'violation' (default) or 'norm'.
   subroutine init(self, op, rho_scale, stopping)
-    class(dual_problem_t), intent(inout) :: self
+    class(dual_problem_t), intent(inout), target :: self
     type(feti_t), intent(inout), target :: op
     real(dp), intent(in) :: rho_scale
     character(len=*), intent(in), optional :: stopping
@@ -147,7 +188,6 @@ contains
     self%op => op
     n = op%n_own()
     call self%init_base(op%comm(), n)
-    self%has_equality = .true.
     self%rho = rho_scale*op%norm_pfp()
     if (.not. (op%norm_pfp() > 0 .and. op%norm_pfp() < huge(1.0_dp))) &
       call fatal_error('the norm of the dual operator P F P is not a positive finite number; '// &
@@ -163,6 +203,7 @@ contains
     call self%prepare()
     self%stop_violation = .true.
     if (present(stopping)) self%stop_violation = stopping == 'violation'
+    call self%make_parts()
     call self%form_rhs()
   end subroutine init
 
@@ -214,7 +255,7 @@ contains
       call MPI_Allreduce(mine, self%force_floor, 1, MPI_REAL_DP, MPI_MAX, op%comm(), ierr)
       self%force_floor = self%force_floor*self%stop_scale
       self%stop_scale = self%stop_scale/self%scale
-      self%relative_eq_measure = .true.
+      self%eq%relative_measure = .true.
     end if
     end associate
   end subroutine form_rhs
@@ -237,16 +278,22 @@ contains
   !> condition estimate exceeds `switch_kappa` (required with 'auto'; see
   !> the module). After init. Collective.
   subroutine set_preconditioner(self, kind, weights, switch_kappa)
-    class(dual_problem_t), intent(inout) :: self
+    class(dual_problem_t), intent(inout), target :: self
     character(len=*), intent(in) :: kind
     real(dp), intent(in) :: weights(:)
     real(dp), intent(in), optional :: switch_kappa
-    call self%prec%free()
+    call self%m_inv%free()
     self%use_prec = kind /= 'none'
     self%auto_mode = kind == 'auto'
     self%switch_at = -1
     self%switch_estimate = 0
+    if (allocated(self%prec)) deallocate (self%prec)
     if (.not. self%use_prec) return
+    allocate (dual_m_inverse_t :: self%prec)
+    select type (part => self%prec)
+    type is (dual_m_inverse_t)
+      part%owner => self
+    end select
     if (self%auto_mode) then
       if (.not. present(switch_kappa)) call fatal_error("dual_problem: preconditioner 'auto' needs switch_kappa")
       if (.not. switch_kappa > 1) call fatal_error("dual_problem: switch_kappa must be > 1")
@@ -256,13 +303,13 @@ contains
         ! the dense local solver's factors give S_s at no set-up cost and
         ! each application costs what a lumped one does: 'dirichlet' at once
         ! (recorded as a switch at 0 products with estimate 0; the set-up's log says so)
-        call self%op%init_preconditioner(self%prec, 'dirichlet', weights)
+        call self%op%init_preconditioner(self%m_inv, 'dirichlet', weights)
         self%switch_at = 0
       else
-        call self%op%init_preconditioner(self%prec, 'lumped', weights)
+        call self%op%init_preconditioner(self%m_inv, 'lumped', weights)
       end if
     else
-      call self%op%init_preconditioner(self%prec, kind, weights)
+      call self%op%init_preconditioner(self%m_inv, kind, weights)
     end if
     if (allocated(self%wp)) deallocate (self%wp, self%wq, self%wm)
     allocate (self%wp(self%n), self%wq(self%n), self%wm(self%n))
@@ -291,8 +338,8 @@ contains
     if (.not. self%watches_condition()) return
     if (.not. kappa > self%switch_kappa) return
     call timer_start('preconditioner setup')
-    call self%prec%free()
-    call self%op%init_preconditioner(self%prec, 'dirichlet', self%prec_weights)
+    call self%m_inv%free()
+    call self%op%init_preconditioner(self%m_inv, 'dirichlet', self%prec_weights)
     call timer_stop('preconditioner setup')
     self%switch_at = self%n_products
     self%switch_estimate = kappa
@@ -312,7 +359,7 @@ contains
     class(dual_problem_t), intent(in) :: self
     character(len=:), allocatable :: name
     name = 'none'
-    if (self%use_prec) name = self%prec%kind()
+    if (self%use_prec) name = self%m_inv%kind()
   end function preconditioner_name
 
   !> z = M_A^{-1} r = s P M^{-1} P r + (sigma/rho') (r - P r) (see the
@@ -327,7 +374,7 @@ contains
     end if
     call self%apply_projector(r, self%wp, .false.)
     self%wq = r(1:self%n) - self%wp
-    call self%prec%apply(self%wp, self%wm)
+    call self%m_inv%apply(self%wp, self%wm)
     call self%apply_projector(self%wm, self%wp, .false.)
     z(1:self%n) = self%scale*self%wp + (self%prec_q_weight/self%penalty())*self%wq
   end subroutine precondition
@@ -440,7 +487,7 @@ contains
       z(1:self%n) = r(1:self%n)
       return
     end if
-    call self%prec%apply(r, z)
+    call self%m_inv%apply(r, z)
     z(1:self%n) = self%scale*z(1:self%n)
   end subroutine face_precondition
 
@@ -451,6 +498,24 @@ contains
     self%face_cp => null()
     self%face_ready = .false.
   end subroutine face_free
+
+  !> The QP's parts the solvers see (qp_problem): the equality constraint
+  !> and, where the problem has one, the face solver (the preconditioner:
+  !> set_preconditioner). `self` must stay where it is while they live.
+  subroutine make_parts(self)
+    class(dual_problem_t), intent(inout), target :: self
+    allocate (dual_equality_t :: self%eq)
+    select type (part => self%eq)
+    type is (dual_equality_t)
+      part%owner => self
+    end select
+    if (.not. self%has_face_solver()) return
+    allocate (dual_face_t :: self%face)
+    select type (part => self%face)
+    type is (dual_face_t)
+      part%owner => self
+    end select
+  end subroutine make_parts
 
   !> Extra set-up of an extension before b is formed (none here).
   subroutine prepare(self)
@@ -633,7 +698,7 @@ contains
     call self%free_base()
     if (allocated(self%px)) deallocate (self%px, self%fpx, self%pfpx)
     if (allocated(self%last_g)) deallocate (self%last_g, self%last_z, self%x_g, self%x_z)
-    call self%prec%free()
+    call self%m_inv%free()
     self%use_prec = .false.
     self%auto_mode = .false.
     if (allocated(self%wp)) deallocate (self%wp, self%wq, self%wm)
@@ -642,4 +707,137 @@ contains
     self%face_masked_count = -1
     self%op => null()
   end subroutine free
+
+  ! ---- the parts: each forwards to its owner --------------------------------
+
+  integer(ip) function eq_part_size(self)
+    class(dual_equality_t), intent(in) :: self
+    eq_part_size = self%owner%eq_size()
+  end function eq_part_size
+
+  subroutine eq_part_residual(self, x, z, cnorm)
+    class(dual_equality_t), intent(inout) :: self
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(out) :: z(:)
+    real(dp), intent(out) :: cnorm
+    call self%owner%eq_residual(x, z, cnorm)
+  end subroutine eq_part_residual
+
+  subroutine eq_part_apply_t(self, muhat, y)
+    class(dual_equality_t), intent(inout) :: self
+    real(dp), intent(in) :: muhat(:)
+    real(dp), intent(out) :: y(:)
+    call self%owner%eq_apply_t(muhat, y)
+  end subroutine eq_part_apply_t
+
+  real(dp) function eq_part_penalty(self)
+    class(dual_equality_t), intent(in) :: self
+    eq_part_penalty = self%owner%penalty()
+  end function eq_part_penalty
+
+  subroutine eq_part_set_penalty(self, rho)
+    class(dual_equality_t), intent(inout) :: self
+    real(dp), intent(in) :: rho
+    call self%owner%set_penalty(rho)
+  end subroutine eq_part_set_penalty
+
+  real(dp) function eq_part_measure(self, x, cnorm)
+    class(dual_equality_t), intent(inout) :: self
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(in) :: cnorm
+    eq_part_measure = self%owner%eq_measure(x, cnorm)
+  end function eq_part_measure
+
+  !> The tracking of G x (track_*).
+  subroutine eq_part_moved(self, how, alpha)
+    class(dual_equality_t), intent(inout) :: self
+    integer, intent(in) :: how
+    real(dp), intent(in), optional :: alpha
+    select case (how)
+    case (moved_to_argument)
+      call self%owner%track_last()
+    case (moved_along_argument)
+      call self%owner%track_step(alpha)
+    case default
+      call self%owner%track_reset()
+    end select
+  end subroutine eq_part_moved
+
+  subroutine prec_part_apply(self, r, z)
+    class(dual_m_inverse_t), intent(inout) :: self
+    real(dp), intent(in) :: r(:)
+    real(dp), intent(out) :: z(:)
+    call self%owner%precondition(r, z)
+  end subroutine prec_part_apply
+
+  logical function prec_part_watches(self)
+    class(dual_m_inverse_t), intent(in) :: self
+    prec_part_watches = self%owner%watches_condition()
+  end function prec_part_watches
+
+  subroutine prec_part_condition(self, kappa, switched)
+    class(dual_m_inverse_t), intent(inout) :: self
+    real(dp), intent(in) :: kappa
+    logical, intent(out) :: switched
+    call self%owner%condition_estimate(kappa, switched)
+  end subroutine prec_part_condition
+
+  subroutine face_part_init(self, free, reused)
+    class(dual_face_t), intent(inout) :: self
+    logical, intent(in) :: free(:)
+    logical, intent(out), optional :: reused
+    call self%owner%face_init(free, reused)
+  end subroutine face_part_init
+
+  subroutine face_part_coefficient(self, x, y)
+    class(dual_face_t), intent(inout) :: self
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(out) :: y(:)
+    call self%owner%face_coefficient(x, y)
+  end subroutine face_part_coefficient
+
+  subroutine face_part_apply(self, x, y)
+    class(dual_face_t), intent(inout) :: self
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(out) :: y(:)
+    call self%owner%face_operator(x, y)
+  end subroutine face_part_apply
+
+  subroutine face_part_release(self)
+    class(dual_face_t), intent(inout) :: self
+    call self%owner%face_free()
+  end subroutine face_part_release
+
+  !> s M^{-1} r (face_precondition; the problem's M_A^{-1} is not used).
+  subroutine face_part_precondition(self, prec, r, z)
+    class(dual_face_t), intent(inout) :: self
+    class(qp_preconditioner_t), intent(inout) :: prec
+    real(dp), intent(in) :: r(:)
+    real(dp), intent(out) :: z(:)
+    call self%owner%face_precondition(r, z)
+  end subroutine face_part_precondition
+
+  logical function face_part_regular(self)
+    class(dual_face_t), intent(in) :: self
+    face_part_regular = self%owner%face_always_regular()
+  end function face_part_regular
+
+  logical function face_part_lazy(self)
+    class(dual_face_t), intent(in) :: self
+    face_part_lazy = self%owner%face_lazy()
+  end function face_part_lazy
+
+  subroutine face_part_apply_lazy(self, p, q)
+    class(dual_face_t), intent(inout) :: self
+    real(dp), intent(in) :: p(:)
+    real(dp), intent(out) :: q(:)
+    call self%owner%face_operator_lazy(p, q)
+  end subroutine face_part_apply_lazy
+
+  subroutine face_part_range_coefficient(self, y, c)
+    class(dual_face_t), intent(inout) :: self
+    real(dp), intent(in) :: y(:)
+    real(dp), intent(out) :: c(:)
+    call self%owner%eq_range_coefficient(y, c)
+  end subroutine face_part_range_coefficient
 end module dual_problem

@@ -97,7 +97,6 @@ contains
   logical function has_face_solver(self)
     class(dual_problem_orth_t), intent(in) :: self
     has_face_solver = .false.
-    if (self%n < 0) has_face_solver = .true.   ! never: keeps self referenced
   end function has_face_solver
 
   subroutine free(self)

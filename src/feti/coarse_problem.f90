@@ -555,7 +555,7 @@ contains
       end if
       do j1 = 1, nb
         do j2 = j1, nb
-          call add_product(pos(j1), pos(j2), blk(:, j1), blk(:, j2))
+          call add_product(blocks, pos(j1), pos(j2), blk(:, j1), blk(:, j2))
         end do
       end do
     end do
@@ -627,25 +627,26 @@ contains
       call move_alloc(new_j, jcn)
       call move_alloc(new_a, a)
     end subroutine send_to_groups
-
-    !> block(ps, pt) += u v^T, kept as an upper-triangular block pair
-    subroutine add_product(ps, pt, u, v)
-      integer(ip), intent(in) :: ps, pt
-      real(dp), intent(in) :: u(6), v(6)
-      real(dp) :: outer(6, 6)
-      integer :: a1, a2
-      do a2 = 1, 6
-        do a1 = 1, 6
-          outer(a1, a2) = u(a1)*v(a2)
-        end do
-      end do
-      if (ps <= pt) then
-        call blocks%add(ps, pt, outer)
-      else
-        call blocks%add(pt, ps, transpose(outer))
-      end if
-    end subroutine add_product
   end subroutine assemble
+
+  !> block(ps, pt) += u v^T, kept as an upper-triangular block pair
+  subroutine add_product(blocks, ps, pt, u, v)
+    type(block_hash_t), intent(inout) :: blocks
+    integer(ip), intent(in) :: ps, pt
+    real(dp), intent(in) :: u(6), v(6)
+    real(dp) :: outer(6, 6)
+    integer :: a1, a2
+    do a2 = 1, 6
+      do a1 = 1, 6
+        outer(a1, a2) = u(a1)*v(a2)
+      end do
+    end do
+    if (ps <= pt) then
+      call blocks%add(ps, pt, outer)
+    else
+      call blocks%add(pt, ps, transpose(outer))
+    end if
+  end subroutine add_product
 
   !> The nonzero 6-blocks of G^T of every owned row with their subdomains, in
   !> `con` (constraints_t g_row_*), unless they are there already. A row has

@@ -147,14 +147,14 @@ contains
     integer :: ierr, rank
     logical :: filling
     integer(ip) :: cslot   ! visit -> emit: the unit's position in the node's unit list
-    real(dp), allocatable :: sub_weight(:)   ! w of every subdomain (copy_weights)
+    real(dp), allocatable :: sub_weight(:)   ! w of every subdomain (subdomain_weights)
 
     con%comm = comm
     call MPI_Comm_rank(comm, rank, ierr)
     me = rank
 
     ! 1. Records of every B entry of the local subdomains (count, then fill).
-    call subdomain_weights()
+    sub_weight = subdomain_weights(settings, dec)
     nrec = 0
     call visit(.false.)
     allocate (rec(nrec))
@@ -164,10 +164,8 @@ contains
     call order_rows(rec, me, con, row_of_rec, urow_first, local_index, ghost_owner)
     ! 3. The rows' data and the B^s entries per local subdomain.
     call fill_rows(rec, urow_first, row_of_rec, local_index, subs, con)
-    ! 4. Sizes.
-    call count_rows(comm, rank, con)
-    ! 5. Exchange pattern.
-    call build_exchange(dec, con, ghost_owner, me, sub_dec)
+    call count_rows(comm, rank, con)                          ! 4. sizes
+    call build_exchange(dec, con, ghost_owner, me, sub_dec)   ! 5. exchange pattern
 
   contains
 
@@ -205,7 +203,7 @@ contains
             if (m == 1 .and. .not. (any(dirichlet) .or. contact)) cycle
             j = findloc(copies(1:m), s_id, 1)
             owner = dec%subdomain_rank(copies(1))
-            call copy_weights(copies(1:m), w(1:m))
+            w(1:m) = sub_weight(copies(1:m))     ! w_c = E(s_c)/young with scaling = 'young', else 1
             cslot = j
           end if
           do comp = 1, 3
@@ -247,28 +245,6 @@ contains
       end do
     end subroutine visit
 
-    !> w_c = E(s_c)/young for the copies' subdomains with &solver scaling =
-    !> 'young', else 1 (sub_weight).
-    subroutine copy_weights(ids, w)
-      integer(ip), intent(in) :: ids(:)
-      real(dp), intent(out) :: w(:)
-      w = sub_weight(ids)
-    end subroutine copy_weights
-
-    !> sub_weight(s) = E(s)/young for every subdomain with &solver scaling = 'young', else 1.
-    !> From the parameters alone: the same on every rank.
-    subroutine subdomain_weights()
-      integer(ip) :: s
-      real(dp) :: young, nu
-      allocate (sub_weight(dec%nsubdomains))
-      sub_weight = 1
-      if (settings%scaling%scaling /= 'young') return
-      do s = 1, dec%nsubdomains
-        call subdomain_material(settings%material, dec, s, young, nu)
-        sub_weight(s) = young/settings%material%young
-      end do
-    end subroutine subdomain_weights
-
     subroutine emit(key, owner, ls, dof, node, gid, kind, slot, val, c, scale, unit)
       integer(i8), intent(in) :: key
       integer, intent(in) :: owner
@@ -278,6 +254,23 @@ contains
       if (filling) rec(nrec) = record_t(key, owner, ls, dof, node, gid, kind, slot, cslot, val, c, scale, unit)
     end subroutine emit
   end subroutine build_constraints
+
+  !> w(s) = E(s)/young for every subdomain with &solver scaling = 'young', else 1.
+  !> From the parameters alone: the same on every rank.
+  function subdomain_weights(settings, dec) result(w)
+    type(feti_settings_t), intent(in) :: settings
+    type(decomposition_t), intent(in) :: dec
+    real(dp), allocatable :: w(:)
+    integer(ip) :: s
+    real(dp) :: young, nu
+    allocate (w(dec%nsubdomains))
+    w = 1
+    if (settings%scaling%scaling /= 'young') return
+    do s = 1, dec%nsubdomains
+      call subdomain_material(settings%material, dec, s, young, nu)
+      w(s) = young/settings%material%young
+    end do
+  end function subdomain_weights
 
   !> The unique rows of the records `rec` in key order: `row_of_rec` the
   !> row of each record, `urow_first` the first record of each row (sorted

@@ -256,8 +256,8 @@ contains
           end do
           c = c/count(ok)
         end if
-        chosen(1) = farthest_from(c)
-        chosen(2) = farthest_from(xyz(:, chosen(1)))
+        chosen(1) = farthest_from(sub, ok, c)
+        chosen(2) = farthest_from(sub, ok, xyz(:, chosen(1)))
         nf = 2
         diameter = norm2(xyz(:, chosen(2)) - xyz(:, chosen(1)))
         ! largest triangle with the first two
@@ -298,7 +298,7 @@ contains
           mindist(a) = merge(huge(1.0_dp), -1.0_dp, ok(a))
         end do
         do a = 1, nf
-          call update_mindist(chosen(a))
+          call update_mindist(sub, mindist, chosen(a))
         end do
         ratio = gram_ratio_of(sub, chosen(1:nf))
         do while (ratio < gram_ratio_wanted .and. nf < limit)
@@ -306,40 +306,47 @@ contains
           if (mindist(best) <= 0) exit
           nf = nf + 1
           chosen(nf) = best
-          call update_mindist(best)
+          call update_mindist(sub, mindist, best)
           ratio = gram_ratio_of(sub, chosen(1:nf))
         end do
         nodes = chosen(1:nf)
       end associate
     end subroutine choose_among
 
-    integer(ip) function farthest_from(p)
-      real(dp), intent(in) :: p(3)
-      integer(ip) :: b
-      real(dp) :: d, dmax
-      farthest_from = 1
-      dmax = -1
-      do b = 1, sub%nnodes
-        if (.not. ok(b)) cycle
-        d = sum((sub%coords(:, b) - p)**2)
-        if (d > dmax) then
-          dmax = d
-          farthest_from = b
-        end if
-      end do
-    end function farthest_from
-
-    subroutine update_mindist(node)
-      integer(ip), intent(in) :: node
-      integer(ip) :: b
-      real(dp) :: x(3)
-      x = sub%coords(:, node)
-      do b = 1, sub%nnodes
-        if (mindist(b) < 0) cycle
-        mindist(b) = min(mindist(b), norm2(sub%coords(:, b) - x))
-      end do
-    end subroutine update_mindist
   end subroutine choose_fixing_nodes
+
+  !> The node with ok(node) farthest from the point p (the first of equals).
+  integer(ip) function farthest_from(sub, ok, p)
+    type(subdomain_t), intent(in) :: sub
+    logical, intent(in) :: ok(:)
+    real(dp), intent(in) :: p(3)
+    integer(ip) :: b
+    real(dp) :: d, dmax
+    farthest_from = 1
+    dmax = -1
+    do b = 1, sub%nnodes
+      if (.not. ok(b)) cycle
+      d = sum((sub%coords(:, b) - p)**2)
+      if (d > dmax) then
+        dmax = d
+        farthest_from = b
+      end if
+    end do
+  end function farthest_from
+
+  !> mindist(b) <- min(mindist(b), |x_b - x_node|) where mindist(b) >= 0.
+  subroutine update_mindist(sub, mindist, node)
+    type(subdomain_t), intent(in) :: sub
+    real(dp), intent(inout) :: mindist(:)
+    integer(ip), intent(in) :: node
+    integer(ip) :: b
+    real(dp) :: x(3)
+    x = sub%coords(:, node)
+    do b = 1, sub%nnodes
+      if (mindist(b) < 0) cycle
+      mindist(b) = min(mindist(b), norm2(sub%coords(:, b) - x))
+    end do
+  end subroutine update_mindist
 
   pure function cross(u, v) result(w)
     real(dp), intent(in) :: u(3), v(3)

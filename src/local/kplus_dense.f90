@@ -255,7 +255,7 @@ contains
       integer(i8) :: nz, k0
       k0 = this%kptr(row0 + 1)
       nz = count(kd(1:ni, ni + 1:ni + nd) /= 0, kind=i8)
-      if (k0 + nz > size(this%kcol, kind=i8)) call grow_kid(max(k0 + nz, 2*size(this%kcol, kind=i8)))
+      if (k0 + nz > size(this%kcol, kind=i8)) call grow_kid(this, max(k0 + nz, 2*size(this%kcol, kind=i8)))
       nz = k0
       do r = 1, ni
         do c = 1, nd
@@ -294,18 +294,20 @@ contains
       this%fptr(s + 1) = this%fptr(s) + nf
       this%fboff(s + 1) = this%fboff(s) + nb
     end subroutine append_fixing
-
-    subroutine grow_kid(cap)
-      integer(i8), intent(in) :: cap
-      integer(ip), allocatable :: tc(:)
-      real(dp), allocatable :: tv(:)
-      allocate (tc(cap), tv(cap))
-      tc(1:size(this%kcol)) = this%kcol
-      tv(1:size(this%kval)) = this%kval
-      call move_alloc(tc, this%kcol)
-      call move_alloc(tv, this%kval)
-    end subroutine grow_kid
   end subroutine init_split
+
+  !> kcol and kval grown to `cap` entries (their contents kept).
+  subroutine grow_kid(this, cap)
+    class(kplus_dense_t), intent(inout) :: this
+    integer(i8), intent(in) :: cap
+    integer(ip), allocatable :: tc(:)
+    real(dp), allocatable :: tv(:)
+    allocate (tc(cap), tv(cap))
+    tc(1:size(this%kcol)) = this%kcol
+    tv(1:size(this%kval)) = this%kval
+    call move_alloc(tc, this%kcol)
+    call move_alloc(tv, this%kval)
+  end subroutine grow_kid
 
   !> x <- K^+ x for the concatenated vector of all blocks.
   subroutine solve(this, x)

@@ -8,7 +8,7 @@
 !> SMALBE's n_hessian. When the active set was the right one, the next outer
 !> iteration's test accepts the pair at once; otherwise SMALBE goes on from
 !> it (a feasible warm start: SMALBE's Lagrangian test is not applied to that
-!> step). Needs a problem with a face solver (qp_problem: has_face_solver).
+!> step). Needs a problem with a face solver (qp_problem: the part `face`).
 !>
 !> One polish is up to `rounds` face solves (polish_step): a face solve whose
 !> x leaves a bound on a free row is projected and the new face solved at
@@ -35,7 +35,7 @@
 !> (docs/THEORY.md "Polish robustness").
 !> `first`: before SMALBE's first outer iteration, the polish rounds from the
 !> face on which every bounded row is at its bound, where the problem knows
-!> its equality rows alone to fix it (face_always_regular).
+!> its equality rows alone to fix it (face%regular()).
 !> Timer 'polish' (a part of 'solve').
 module active_set_polish
   use kinds, only: dp, ip, i8, name_len, MPI_INT_IP, MPI_INT_I8
@@ -43,8 +43,9 @@ module active_set_polish
   use text, only: counted
   use timers, only: timer_start, timer_stop
   use report_sink, only: report_sink_t
-  use qp_problem, only: qp_problem_t, no_lower_bound
+  use qp_problem, only: qp_problem_t, no_lower_bound, x_moved, moved_other, moved_to_argument
   use face_solve, only: face_polish_t, free_rows, face_changes
+  use outer_step, only: outer_step_t, outer_state_t
   use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_Comm_rank, MPI_DOUBLE_PRECISION, MPI_IN_PLACE
   implicit none
   private
@@ -90,7 +91,7 @@ module active_set_polish
 
   !> The plug-in: its settings, its face solve, its counters (of the last
   !> SMALBE solve) and the state it keeps between outer iterations.
-  type, public :: active_set_polish_t
+  type, extends(outer_step_t), public :: active_set_polish_t
     type(polish_settings_t) :: settings
     type(face_polish_t) :: face                !< the face solve (its counters: the last face solve)
     logical :: monitor = .false.               !< log each polish (SMALBE's monitor)
@@ -107,8 +108,8 @@ module active_set_polish
     integer(ip) :: n_faces_reused = 0          !< face solves on the face before, its matrices reused
     integer(ip) :: n_recycled = 0              !< kept CG directions of earlier runs their starts used
     logical :: polished_first = .false.        !< the last solve started with a polish that was not given up
-    !> the next first_face starts from the face of the given x (its free rows: a warm start),
-    !> not from every bounded row at its bound; first_face clears it
+    !> the next `first` starts from the face of the given x (its free rows: a warm start),
+    !> not from every bounded row at its bound; `first` clears it
     logical :: warm_face = .false.
     logical, allocatable :: free_now(:)        !< the free rows of the current x
     logical, allocatable, private :: free_prev(:)
@@ -121,10 +122,10 @@ module active_set_polish
   contains
     procedure :: reset => polish_reset
     procedure :: start
-    procedure :: first_face
-    procedure :: track
+    procedure :: first
+    procedure :: after_outer
     procedure :: due
-    procedure :: polish
+    procedure :: step
     procedure :: summary
     procedure :: report
   end type active_set_polish_t
@@ -234,18 +235,19 @@ contains
   end subroutine polish_reset
 
   !> Before a solve: zero the counters, decide whether this solve polishes,
-  !> and set up the tracking of the active set (n local rows). Collective.
-  subroutine start(self, problem, n, monitor)
+  !> and set up the tracking of the active set; with st%warm the polish
+  !> first starts from the face of the given x. Collective.
+  subroutine start(self, problem, st)
     class(active_set_polish_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
-    integer(ip), intent(in) :: n
-    logical, intent(in) :: monitor
-    integer(ip) :: local, n_bounded
+    type(outer_state_t), intent(inout) :: st
+    integer(ip) :: n, local, n_bounded
     integer :: ierr
-    self%monitor = monitor
-    self%face%monitor%on = monitor
+    n = problem%n
+    self%monitor = st%monitor
+    self%face%monitor%on = st%monitor
     call self%reset()
-    self%active = self%settings%window > 0 .and. problem%has_face_solver()
+    self%active = self%settings%window > 0 .and. allocated(problem%face)
     if (allocated(self%free_now)) deallocate (self%free_now, self%free_prev)
     allocate (self%free_now(n), self%free_prev(n))
     self%free_prev = .true.
@@ -259,31 +261,28 @@ contains
       call MPI_Allreduce(local, n_bounded, 1, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
       self%settle_limit = self%settings%settle*n_bounded
     end if
+    self%warm_face = st%warm
   end subroutine start
 
   !> The polish first (settings%first): from the face on which every bounded
   !> row is at its bound (x moved there, gradient unknown), the polish rounds
   !> (a primal-dual active set start: the first round releases the rows whose
   !> gradient has the wrong sign); only where the equality rows alone fix the
-  !> problem (face_always_regular). `ran`: it ran; `restored`: given up in its
-  !> first round (x and g as before, SMALBE starts without a gradient).
-  subroutine first_face(self, problem, x, g, muhat, b_lin, ct_mu, tol_gp, per_component, n_hessian, max_hessian, &
-                        n_preconditioner, ran, restored)
+  !> problem (the face is regular). st%ran: it ran; st%restored: given up in
+  !> its first round (x and g as before, SMALBE starts without a gradient).
+  subroutine first(self, problem, x, st)
     class(active_set_polish_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
-    real(dp), intent(inout) :: x(:), g(:), muhat(:), b_lin(:), ct_mu(:)
-    real(dp), intent(in) :: tol_gp
-    logical, intent(in) :: per_component
-    integer(ip), intent(inout) :: n_hessian, n_preconditioner
-    integer(ip), intent(in) :: max_hessian
-    logical, intent(out) :: ran, restored
+    real(dp), intent(inout) :: x(:)
+    type(outer_state_t), intent(inout) :: st
     integer(ip) :: n
-    ran = .false.
-    restored = .false.
-    if (.not. (self%active .and. self%settings%first .and. problem%face_always_regular() .and. max_hessian > 2)) &
+    st%restored = .false.
+    st%ran = self%active .and. self%settings%first .and. st%max_hessian > 2
+    if (st%ran) st%ran = problem%face%regular()
+    if (.not. st%ran) then
       self%warm_face = .false.
-    if (.not. (self%active .and. self%settings%first .and. problem%face_always_regular() .and. max_hessian > 2)) return
-    ran = .true.
+      return
+    end if
     n = problem%n
     if (self%warm_face) then
       ! a warm start: its own face (rows above their bound stay free)
@@ -295,47 +294,46 @@ contains
     end if
     self%warm_face = .false.
     x(1:n) = merge(x(1:n), problem%lower(1:n), self%free_now(1:n))
-    g(1:n) = 0
-    call self%polish(problem, x, 0_ip, g, muhat, b_lin, ct_mu, tol_gp, per_component, n_hessian, max_hessian, &
-                     n_preconditioner, restored)
-    self%polished_first = .not. restored
-  end subroutine first_face
+    st%g(1:n) = 0
+    st%outer = 0
+    call self%step(problem, x, st)
+    self%polished_first = .not. st%restored
+  end subroutine first
 
-  !> After outer iteration `outer` (x its result, `moved`: its inner solve made
-  !> a step): whether the active set changed (on more than settle_limit rows).
-  !> Collective.
-  subroutine track(self, problem, x, outer, moved)
+  !> After outer iteration st%outer (x its result, st%moved: its inner solve
+  !> made a step): whether the active set changed (on more than settle_limit
+  !> rows). Collective.
+  subroutine after_outer(self, problem, x, st)
     class(active_set_polish_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
-    real(dp), intent(in) :: x(:)
-    integer(ip), intent(in) :: outer
-    logical, intent(in) :: moved
+    real(dp), intent(inout) :: x(:)
+    type(outer_state_t), intent(inout) :: st
     integer(ip) :: local, changes
     integer :: ierr
     if (.not. self%active) return
     call free_rows(problem, x, self%free_now)
     local = count(self%free_now .neqv. self%free_prev, kind=ip)
     call MPI_Allreduce(local, changes, 1, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
-    if (outer == 1 .or. changes > self%settle_limit) then
+    if (st%outer == 1 .or. changes > self%settle_limit) then
       self%n_stable = 0
       self%polished_set = .false.
     else
       if (changes > 0) self%polished_set = .false.
-      if (moved) self%n_stable = self%n_stable + 1      ! only outer iterations that moved x count
+      if (st%moved) self%n_stable = self%n_stable + 1      ! only outer iterations that moved x count
     end if
     self%free_prev = self%free_now
-  end subroutine track
+  end subroutine after_outer
 
   !> A polish is due: the active set has been stable for `window` outer
   !> iterations, was not polished, and the budget allows one. Not when every
   !> bounded row is at its bound, unless the problem knows the equality rows
   !> alone to give a regular C_E C_E^T (else C_F C_F^T may be singular, e.g.
   !> a body held by its contact only). Collective.
-  logical function due(self, problem, x, n_hessian, max_hessian)
+  logical function due(self, problem, x, st)
     class(active_set_polish_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
-    real(dp), intent(in) :: x(:)
-    integer(ip), intent(in) :: n_hessian, max_hessian
+    real(dp), intent(inout) :: x(:)
+    type(outer_state_t), intent(inout) :: st
     integer(ip) :: local, n_free_bounded
     integer :: ierr
     due = .false.
@@ -344,34 +342,28 @@ contains
       local = count(self%free_now .and. problem%lower(1:problem%n) > no_lower_bound, kind=ip)
       call MPI_Allreduce(local, n_free_bounded, 1, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
       if (n_free_bounded == 0 .and. problem%count_at_bound(x) > 0) then
-        if (.not. problem%face_always_regular()) self%polished_set = .true.
+        if (.not. problem%face%regular()) self%polished_set = .true.
       end if
     end if
     due = ready()
   contains
     logical function ready()
       ready = self%n_stable >= self%settings%window .and. .not. self%polished_set .and. &
-              self%n_polish - self%n_given_up < self%settings%max_count .and. n_hessian >= self%hessian_wait .and. &
-              max_hessian - n_hessian > 2
+              self%n_polish - self%n_given_up < self%settings%max_count .and. &
+              st%n_hessian >= self%hessian_wait .and. st%max_hessian - st%n_hessian > 2
     end function ready
   end function due
 
-  !> One polish after outer iteration `outer` (0: the polish first) of SMALBE's
-  !> pair (x, muhat) with gradient g, linear term b_lin = b - C^T mu and
-  !> ct_mu = C^T mu, and what the tracking keeps of it. `restored`: the first
-  !> face solve was given up (x, g, muhat as before). Collective.
-  subroutine polish(self, problem, x, outer, g, muhat, b_lin, ct_mu, tol_gp, per_component, n_hessian, &
-                    max_hessian, n_preconditioner, restored)
+  !> One polish after outer iteration st%outer (0: the polish first) of
+  !> SMALBE's pair (x, st%muhat) with gradient st%g, linear term st%b_lin =
+  !> b - C^T mu and st%ct_mu = C^T mu. st%restored: the first face solve was
+  !> given up (x, g, muhat as before). Collective.
+  subroutine step(self, problem, x, st)
     class(active_set_polish_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
-    real(dp), intent(inout) :: x(:), g(:), muhat(:), b_lin(:), ct_mu(:)
-    integer(ip), intent(in) :: outer, max_hessian
-    real(dp), intent(in) :: tol_gp
-    logical, intent(in) :: per_component
-    integer(ip), intent(inout) :: n_hessian, n_preconditioner
-    logical, intent(out) :: restored
-    call polish_step(self, problem, x, outer, g, muhat, b_lin, ct_mu, tol_gp, per_component, n_hessian, &
-                     max_hessian, n_preconditioner, restored)
+    real(dp), intent(inout) :: x(:)
+    type(outer_state_t), intent(inout) :: st
+    call polish_step(self, problem, x, st)
     self%free_prev = self%free_now
     self%n_stable = 0
     self%polished_set = .true.
@@ -381,10 +373,10 @@ contains
       ! again; the next polish waits until the products have doubled (its budget grows with
       ! them), which bounds the waste by the products spent
       self%n_given_up = self%n_given_up + 1
-      self%hessian_wait = 2*n_hessian
+      self%hessian_wait = 2*st%n_hessian
       self%polished_set = .false.
     end if
-  end subroutine polish
+  end subroutine step
 
   !> The polish's line of SMALBE's monitor summary (n_forced: SMALBE's inner
   !> solves made to take a step after a polish).
@@ -444,22 +436,20 @@ contains
   !> polish (SMALBE goes on from the feasible pair). Equal change counts on
   !> new sets go on (a polish may change 24, 4, 4, ... rows on its way to
   !> the solution's face). Collective.
-  subroutine polish_step(self, problem, x, outer, g, muhat, b_lin, ct_mu, tol_gp, per_component, n_hessian, &
-                         max_hessian, n_preconditioner, restored)
+  subroutine polish_step(self, problem, x, st)
     class(active_set_polish_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
-    real(dp), intent(inout) :: x(:), g(:), muhat(:), b_lin(:), ct_mu(:)
-    integer(ip), intent(in) :: outer, max_hessian
-    real(dp), intent(in) :: tol_gp
-    logical, intent(in) :: per_component
-    integer(ip), intent(inout) :: n_hessian, n_preconditioner
-    logical, intent(out) :: restored      !< the first face solve was given up: x, mu as before
+    real(dp), intent(inout) :: x(:)
+    type(outer_state_t), intent(inout) :: st
     integer(ip) :: n, i, budget, budget_trusted, counts(2), rounds, n_changes, prev_changes
     real(dp) :: change_tol, loose
     logical :: again, cycling, revisited, g_known, revisit_used, reused
     logical, allocatable :: cut_short(:)
     integer(i8), allocatable :: signatures(:, :)
     character(len=400) :: buf
+    associate (outer => st%outer, g => st%g, muhat => st%muhat, b_lin => st%b_lin, ct_mu => st%ct_mu, &
+               tol_gp => st%tol_gp, per_component => st%per_component, n_hessian => st%n_hessian, &
+               max_hessian => st%max_hessian, n_preconditioner => st%n_preconditioner, restored => st%restored)
     call timer_start('polish')
     restored = .false.
     n = problem%n
@@ -491,7 +481,7 @@ contains
       ! the loose check only where another round may follow
       loose = 0
       if (rounds < self%settings%rounds) loose = self%settings%loose
-      call problem%face_init(self%free_now, reused)
+      call problem%face%init(self%free_now, reused)
       if (reused) self%n_faces_reused = self%n_faces_reused + 1
       ! after a round that only released rows, x is that round's face solution unchanged (on the new
       ! face too) and its gradient is known: the Lagrangian gradient without the multiplier term
@@ -501,7 +491,7 @@ contains
       self%face%monitor%round = rounds
       call self%face%run(problem, self%free_now, x, g, muhat, polish_target*tol_gp, per_component, budget, loose, &
                          change_tol, budget_trusted, g_known)
-      call problem%face_free()
+      call problem%face%release()
       cut_short(rounds) = self%face%stopped_loose
       self%n_rounds = self%n_rounds + 1
       self%n_recycled = self%n_recycled + self%face%recycle%n_used
@@ -513,12 +503,12 @@ contains
         x(1:n) = self%x_prev(1:n)
         g(1:n) = self%g_prev(1:n)
         muhat = self%muhat_prev
-        call problem%track_reset()
+        call x_moved(problem, moved_other)
         restored = rounds == 1
         ! x_prev is the previous round's x after the change of the face (projected): the
         ! gradient saved with it is that of the x before the projection, so recompute it
         ! (b_lin and ct_mu still belong to muhat_prev, the previous round's face multiplier)
-        if (rounds > 1) call fresh_gradient(self, problem, x, g, b_lin, n_hessian)
+        if (rounds > 1) call fresh_gradient(self, problem, x, st)
         self%n_aborted = self%n_aborted + 1
         write (buf, '(a,i0,a,i0,a)') 'after outer ', outer, ': given up after ', self%face%n_steps, &
           ' CG steps (too slow for its budget), iterate restored'
@@ -527,7 +517,7 @@ contains
         exit
       end if
       ! the gradient of the Lagrangian with the face multiplier
-      call problem%eq_apply_t(muhat, ct_mu)
+      call problem%eq%apply_t(muhat, ct_mu)
       do i = 1, n
         b_lin(i) = problem%b(i) - ct_mu(i)
         g(i) = g(i) + ct_mu(i)
@@ -547,17 +537,18 @@ contains
                        revisited)
         if (revisited) then
           call self%face%monitor%note('polish: the next face is that of an earlier round: back to SMALBE')
-          if (counts(1) > 0) call fresh_gradient(self, problem, x, g, b_lin, n_hessian)
+          if (counts(1) > 0) call fresh_gradient(self, problem, x, st)
           exit
         end if
       else if (counts(1) > 0) then
         ! the gradient at the projected x for the inner MPRGP
         call problem%project(x)
-        call problem%track_reset()
-        call fresh_gradient(self, problem, x, g, b_lin, n_hessian)
+        call x_moved(problem, moved_other)
+        call fresh_gradient(self, problem, x, st)
       end if
     end do
     call timer_stop('polish')
+    end associate
   end subroutine polish_step
 
   !> The next face of a polish after round `rounds` (counts: face_changes of
@@ -610,7 +601,7 @@ contains
     end if
     if (counts(1) > 0) then
       call problem%project(x)
-      call problem%track_reset()
+      call x_moved(problem, moved_other)
     end if
     ! only released rows (x unchanged, already on the new face): the next round needs no new gradient
     g_known = counts(1) == 0
@@ -650,18 +641,17 @@ contains
   end subroutine log_round
 
   !> The gradient A x - b_lin at the current x (one product, counted as the polish's).
-  subroutine fresh_gradient(self, problem, x, g, b_lin, n_hessian)
+  subroutine fresh_gradient(self, problem, x, st)
     class(active_set_polish_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
-    real(dp), intent(in) :: x(:), b_lin(:)
-    real(dp), intent(inout) :: g(:)
-    integer(ip), intent(inout) :: n_hessian
+    real(dp), intent(in) :: x(:)
+    type(outer_state_t), intent(inout) :: st
     integer(ip) :: n
     n = problem%n
-    call problem%hessian(x, g)
-    call problem%track_last()
-    g(1:n) = g(1:n) - b_lin(1:n)
-    n_hessian = n_hessian + 1
+    call problem%hessian(x, st%g)
+    call x_moved(problem, moved_to_argument)
+    st%g(1:n) = st%g(1:n) - st%b_lin(1:n)
+    st%n_hessian = st%n_hessian + 1
     self%n_products = self%n_products + 1
   end subroutine fresh_gradient
 

@@ -11,14 +11,14 @@
 !> linear one on Im P_F, solved by projected preconditioned CG (PCPG):
 !> 1. start: x_A := l_A, then x_F -= C_F^T (C_F C_F^T)^{-1} C x (C x = 0);
 !> 2. r = -P_F g, g = A x - b, z = P_F M_F^{-1} r (M^{-1} the problem's
-!>    face_precondition on the rows F, or none), standard CG recurrences; the
-!>    gradient g follows each step (g <- g + alpha q, q = face_operator(p)
-!>    = A p), r is projected anew. A problem with face_lazy() gives instead
-!>    q = face_operator_lazy(p) = A p + C^T c: g then carries terms of the
+!>    face%precondition on the rows F, or none), standard CG recurrences; the
+!>    gradient g follows each step (g <- g + alpha q, q = face%apply(p)
+!>    = A p), r is projected anew. A face with lazy() gives instead
+!>    q = face%apply_lazy(p) = A p + C^T c: g then carries terms of the
 !>    range of C^T, which P_F removes from r and which cancel in the
 !>    Lagrangian gradient g + C^T mu of the loose checks (mu follows g); every
 !>    lazy_fold steps and at the end they leave g (`fold`: one
-!>    eq_range_coefficient of the change of g since the last fold);
+!>    face%range_coefficient of the change of g since the last fold);
 !> 3. stop when the stopping measure of r (the problem's weighted maximum
 !>    with a per-component test, else ||r||) is <= target, or after max_steps
 !>    steps, or (`aborted`) after abort_check steps or more when the mean
@@ -30,7 +30,7 @@
 !> step 2 are skipped.
 !> The multiplier that makes the face's KKT conditions hold in the least
 !> squares sense is mu = -(C_F C_F^T)^{-1} C_F g_F (returned in the form
-!> eq_apply_t takes, `muhat`), so that g + C^T mu = P_F g on F.
+!> eq%apply_t takes, `muhat`), so that g + C^T mu = P_F g on F.
 !> On Im P_F, C p = 0, so A p = A_0 p (the penalty rho C^T C drops out) and
 !> P_F A_0 = P_F F for the FETI dual (P_F kills Im G^T): the face problem is
 !> the same with or without the penalty and the FETI projector P.
@@ -53,10 +53,10 @@
 !> lie in its face: a Galerkin start after step 1, deflated CG in step 2
 !> (module face_recycle; no Hessian products).
 !> The problem provides C_F C_F^T through qp_problem's face hooks
-!> (face_init, face_coefficient). Every routine is collective.
+!> (face%init, face%coefficient). Every routine is collective.
 module face_solve
   use kinds, only: dp, ip, MPI_INT_IP
-  use qp_problem, only: qp_problem_t, no_lower_bound
+  use qp_problem, only: qp_problem_t, no_lower_bound, x_moved, moved_other
   use mprgp, only: ensure_size
   use ritz_values, only: cg_ritz_t
   use solver_monitor, only: solver_monitor_t
@@ -146,7 +146,7 @@ contains
   end function face_changes
 
   !> py = P_F y (y restricted to F first; py may not be y); c: the
-  !> coefficients of C_F^T (C_F C_F^T)^{-1} C_F y_F (eq_size). Collective.
+  !> coefficients of C_F^T (C_F C_F^T)^{-1} C_F y_F (eq%size()). Collective.
   subroutine face_project(problem, free, y, py, c)
     class(qp_problem_t), intent(inout) :: problem
     logical, intent(in) :: free(:)
@@ -158,12 +158,12 @@ contains
     n = problem%n
     allocate (w(n))
     w = merge(y(1:n), 0.0_dp, free(1:n))
-    call problem%face_coefficient(w, c)
-    call problem%eq_apply_t(c, py)
+    call problem%face%coefficient(w, c)
+    call problem%eq%apply_t(c, py)
     py(1:n) = merge(w - py(1:n), 0.0_dp, free(1:n))
   end subroutine face_project
 
-  !> PCPG on the face of `free` (face_init(free) already called) from x;
+  !> PCPG on the face of `free` (face%init(free) already called) from x;
   !> on return x is on the face (x_A = l_A, C x = 0 up to the coarse solves),
   !> g = A x - b (without multiplier) and muhat the face multiplier (see the
   !> module). per_component: measure r by problem%weighted_max, else ||r||.
@@ -193,45 +193,18 @@ contains
     logical :: prec, check, switched, lazy, known
 
     n = problem%n
-    call ensure_size(self%r, n)
-    call ensure_size(self%z, n)
-    call ensure_size(self%p, n)
-    call ensure_size(self%q, n)
-    call ensure_size(self%w, n)
-    call ensure_size(self%cz, size(muhat, kind=ip))
-    self%n_hessian = 0
-    self%n_steps = 0
-    self%n_precondition = 0
-    self%reached = .false.
-    self%breakdown = .false.
-    self%aborted = .false.
-    self%stopped_loose = .false.
-    self%loose_counts = 0
-    self%trusted = .false.
+    call reset_run(self, n, size(muhat, kind=ip))
     cap = max_steps
-    prec = problem%has_preconditioner()
-    lazy = problem%face_lazy()
+    prec = allocated(problem%prec)
+    lazy = problem%face%lazy()
     loose_at = target
     ctol = 0
     if (present(change_tol)) ctol = change_tol
 
     known = .false.
     if (present(g_valid)) known = g_valid
-    if (.not. known) then
-      ! 1. onto the face: x_A = l_A, then C x = 0 by the least squares correction on F
-      x(1:n) = merge(x(1:n), problem%lower(1:n), free(1:n))
-      call problem%face_coefficient(x, muhat)
-      call problem%eq_apply_t(muhat, self%w)
-      x(1:n) = x(1:n) - merge(self%w, 0.0_dp, free(1:n))
-    end if
-    call problem%track_reset()
-
-    ! 2. PCPG
-    if (.not. known) then
-      call problem%hessian(x, g)
-      self%n_hessian = 1
-      g(1:n) = g(1:n) - problem%b(1:n)
-    end if
+    ! 1. onto the face (unless known), then 2. PCPG
+    call onto_face(self, problem, free, x, g, muhat, known)
     call face_project(problem, free, g, self%r, muhat)
     self%r = -self%r
     unfolded = 0          ! updates of g since g0 (face_lazy: the range terms in g come from them)
@@ -240,12 +213,7 @@ contains
       self%g0(1:n) = g(1:n)
     end if
     ! the directions of earlier runs (face_recycle): the Galerkin start (no product), then deflated CG
-    if (self%recycle%begin_run(problem, free)) then
-      call self%recycle%start(problem, x, g, self%r)
-      unfolded = 1
-      call face_project(problem, free, g, self%r, muhat)
-      self%r = -self%r
-    end if
+    if (galerkin_start(self, problem, free, x, g, muhat)) unfolded = 1
     self%measure0 = measure(problem, self%r, per_component)
     self%measure = self%measure0
     self%reached = self%measure <= target
@@ -260,9 +228,9 @@ contains
       do while (self%n_steps < cap)
         if (lazy) then
           ! q = A p + C^T c: g carries the C^T c terms, P_F removes them from r (step 4. takes them out of g)
-          call problem%face_operator_lazy(self%p, self%q)
+          call problem%face%apply_lazy(self%p, self%q)
         else
-          call problem%face_operator(self%p, self%q)
+          call problem%face%apply(self%p, self%q)
         end if
         self%n_hessian = self%n_hessian + 1
         self%n_steps = self%n_steps + 1
@@ -296,8 +264,10 @@ contains
         ! a problem that watches its face condition may change its preconditioner
         ! here (qp_problem; &solver preconditioner = 'auto'): then CG restarts, p = z
         switched = .false.
-        if (prec .and. problem%watches_condition()) &
-          call problem%condition_estimate(max(self%ritz%max_ratio, self%ritz%current_ratio()), switched)
+        if (prec) then
+          if (problem%prec%watches()) &
+            call problem%prec%condition(max(self%ritz%max_ratio, self%ritz%current_ratio()), switched)
+        end if
         call precondition(self, problem, free, prec)
         call self%recycle%deflate(problem, self%z)
         rz_new = problem%dot(self%r, self%z)
@@ -314,13 +284,73 @@ contains
     end if
     ! 3. the face multiplier mu = -(C_F C_F^T)^{-1} C_F g_F: muhat holds the coefficients of
     ! the last projection of g, made after g last changed (the preconditioner's go to cz)
-    call problem%track_reset()
+    call x_moved(problem, moved_other)
     if (self%aborted) return
     ! 4. (face_lazy) the range terms out of g (fold)
     if (lazy .and. unfolded > 0) call fold(self, problem, g, muhat)
     muhat = -muhat
 
   end subroutine run
+
+  !> The Galerkin start from the kept directions of earlier runs, when
+  !> face_recycle has some for this face: x, g and r = -P_F g move (no
+  !> product); true when it did.
+  logical function galerkin_start(self, problem, free, x, g, muhat) result(moved)
+    class(face_polish_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    logical, intent(in) :: free(:)
+    real(dp), intent(inout) :: x(:), g(:), muhat(:)
+    moved = self%recycle%begin_run(problem, free)
+    if (.not. moved) return
+    call self%recycle%start(problem, x, g, self%r)
+    call face_project(problem, free, g, self%r, muhat)
+    self%r = -self%r
+  end function galerkin_start
+
+  !> The run's work vectors (n, and m for the coefficients) and counters.
+  subroutine reset_run(self, n, m)
+    class(face_polish_t), intent(inout) :: self
+    integer(ip), intent(in) :: n, m
+    call ensure_size(self%r, n)
+    call ensure_size(self%z, n)
+    call ensure_size(self%p, n)
+    call ensure_size(self%q, n)
+    call ensure_size(self%w, n)
+    call ensure_size(self%cz, m)
+    self%n_hessian = 0
+    self%n_steps = 0
+    self%n_precondition = 0
+    self%reached = .false.
+    self%breakdown = .false.
+    self%aborted = .false.
+    self%stopped_loose = .false.
+    self%loose_counts = 0
+    self%trusted = .false.
+  end subroutine reset_run
+
+  !> Unless `known`: x onto the face (x_A = l_A, then C x = 0 by the least
+  !> squares correction on F) and g = A x - b there (one product).
+  subroutine onto_face(self, problem, free, x, g, muhat, known)
+    class(face_polish_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    logical, intent(in) :: free(:)
+    real(dp), intent(inout) :: x(:), g(:), muhat(:)
+    logical, intent(in) :: known
+    integer(ip) :: n
+    n = problem%n
+    if (.not. known) then
+      x(1:n) = merge(x(1:n), problem%lower(1:n), free(1:n))
+      call problem%face%coefficient(x, muhat)
+      call problem%eq%apply_t(muhat, self%w)
+      x(1:n) = x(1:n) - merge(self%w, 0.0_dp, free(1:n))
+    end if
+    call x_moved(problem, moved_other)
+    if (.not. known) then
+      call problem%hessian(x, g)
+      self%n_hessian = 1
+      g(1:n) = g(1:n) - problem%b(1:n)
+    end if
+  end subroutine onto_face
 
   !> The decisions after a CG step of `run` that did not reach target: the
   !> loose check (when the measure is <= loose_at: stop if the face would
@@ -381,8 +411,8 @@ contains
     integer(ip) :: n
     n = problem%n
     self%w(1:n) = g(1:n) - self%g0(1:n)
-    call problem%eq_range_coefficient(self%w, self%cz)
-    call problem%eq_apply_t(self%cz, self%w)
+    call problem%face%range_coefficient(self%w, self%cz)
+    call problem%eq%apply_t(self%cz, self%w)
     g(1:n) = g(1:n) - self%w(1:n)
     muhat = muhat - self%cz
     self%g0(1:n) = g(1:n)
@@ -396,7 +426,7 @@ contains
     real(dp), intent(in) :: x(:), g(:), muhat(:), ctol
     integer(ip) :: n
     n = problem%n
-    call problem%eq_apply_t(muhat, self%w)
+    call problem%eq%apply_t(muhat, self%w)
     self%w(1:n) = g(1:n) - self%w(1:n)
     self%loose_counts = face_changes(problem, free, x, self%w, ctol)
     loose_check = sum(self%loose_counts) > 0
@@ -427,7 +457,7 @@ contains
     end if
     n = problem%n
     self%w = merge(self%r, 0.0_dp, free(1:n))
-    call problem%face_precondition(self%w, self%q)
+    call problem%face%precondition(problem%prec, self%w, self%q)
     self%n_precondition = self%n_precondition + 1
     call face_project(problem, free, self%q, self%z, self%cz)
   end subroutine precondition

@@ -64,7 +64,7 @@
 !>
 !> Preconditioning in the face (Dostal, "Optimal Quadratic Programming
 !> Algorithms", 2009, Sec. 5.11): when the problem has a preconditioner
-!> (qp_problem: has_preconditioner, precondition), the CG steps use
+!> (qp_problem: the part `prec`), the CG steps use
 !> z = R_F M_A^{-1} R_F g, the preconditioned free gradient restricted to
 !> the free set (0 on the active set), instead of phi: a run of CG steps
 !> starts with p = z, conjugates with beta_cg = z^T A p / p^T A p and
@@ -86,7 +86,7 @@
 !> values and the largest ratio theta_max/theta_min of a run, over the
 !> calls since the caller reset it (SMALBE: one solve). Without
 !> preconditioner the operator is A on the face, with it R_F M_A^{-1} R_F A.
-!> A problem that watches it (qp_problem: watches_condition; the FETI dual
+!> A problem that watches it (qp_preconditioner: watches; the FETI dual
 !> with `&solver preconditioner = 'auto'`) is handed the running estimate
 !> after every preconditioned CG step and may change its preconditioner;
 !> then the next CG step starts a new run (p = z), as after a face change.
@@ -101,7 +101,8 @@ module mprgp
   use text, only: lower_case
   use qp_problem, only: qp_problem_t, no_lower_bound, compensated_add, qp_status_converged, &
                         qp_status_max_hessian, qp_status_not_finite, qp_status_breakdown, &
-                        qp_status_incompatible, qp_status_not_run, qp_message_len
+                        qp_status_incompatible, qp_status_not_run, qp_message_len, x_moved, &
+                        moved_other, moved_to_argument, moved_along_argument
   use inner_solver, only: inner_solver_t, inner_stop_t
   use solver_monitor, only: step_none, step_cg, step_expansion, step_proportioning
   implicit none
@@ -319,7 +320,7 @@ contains
     mprgp_is_compatible = .false.
     if (self%a_norm <= 0) then
       reason = 'MPRGP is not initialized (call init first)'
-    else if (problem%has_equality) then
+    else if (allocated(problem%eq)) then
       reason = 'MPRGP handles bound constraints only; this problem has the equality constraint C x = 0 '// &
                '(use SMALBE)'
     else if (.not. (allocated(problem%b) .and. allocated(problem%lower))) then
@@ -387,7 +388,7 @@ contains
     self%n_best = 0
     self%n_norm_updates = 0
     self%n_preconditioner = 0
-    self%preconditioned = problem%has_preconditioner()
+    self%preconditioned = allocated(problem%prec)
     self%status = qp_status_not_run
     self%message = ''
   end subroutine reset_run
@@ -407,8 +408,8 @@ contains
     class(inner_stop_t), intent(inout) :: stop_rule
     integer(ip), intent(in) :: max_hessian
     logical, intent(in) :: gradient_given
-    real(dp) :: stats(4), gp, alpha_f, alpha_cg, pap, a_refined
-    logical :: stop, restart, conjugate_pending
+    real(dp) :: stats(4), alpha_f, alpha_cg, pap
+    logical :: restart, conjugate_pending
     integer(ip) :: n
     integer :: last_kind                   ! the kind of the last step (the rule's monitor)
 
@@ -416,13 +417,13 @@ contains
     call reset_run(self, problem)
 
     if (.not. gradient_given) then
-      call problem%track_reset()
+      call x_moved(problem, moved_other)
       if (max_hessian < 1) then
         call set_status(self, qp_status_max_hessian, 'Hessian multiplication cap reached', max_hessian)
         return
       end if
       call apply_hessian(self, problem, x, g)
-      call problem%track_last()
+      call x_moved(problem, moved_to_argument)
       g(1:n) = g(1:n) - b_lin(1:n)
     end if
     call gradient_part(problem, x, g, .false., self%p)
@@ -432,38 +433,8 @@ contains
     last_kind = step_none
 
     do
-      gp = sqrt(stats(1) + stats(2))
-      self%gp_norm = gp
-      if (.not. all(ieee_is_finite(stats))) then
-        call set_status(self, qp_status_not_finite, 'non-finite value in ||g^P||', self%n_iterations)
-        exit
-      end if
-      if (gp < self%best_gp_norm) then
-        self%best_gp_norm = gp
-        self%n_best = self%n_iterations
-      end if
-      call stop_rule%observe(last_kind, self%n_hessian, gp)
-      call stop_rule%test(problem, x, g, gp, stop)
-      if (stop) then
-        call set_status(self, qp_status_converged, 'converged (stopping rule met)', self%n_iterations)
-        exit
-      end if
-      if (self%n_hessian >= max_hessian) then
-        call set_status(self, qp_status_max_hessian, 'Hessian multiplication cap reached', max_hessian)
-        exit
-      end if
-
-      if (.not. self%norm_refined) then
-        ! the first step of this MPRGP: the problem's better ||A|| (deferred
-        ! Lanczos, dual_problem%refined_norm) before alpha_bar is used
-        self%norm_refined = .true.
-        a_refined = problem%refined_norm()
-        if (a_refined > self%a_norm) then
-          self%a_norm = a_refined
-          self%alpha_bar = self%alpha_scale/self%a_norm
-          call split_stats(self, problem, x, g, stats)
-        end if
-      end if
+      if (stops_here(self, problem, x, g, stats, stop_rule, last_kind, max_hessian)) exit
+      if (.not. self%norm_refined) call refine_norm(self, problem, x, g, stats)
       if (stats(2) <= self%gamma**2*stats(3)) then
         ! proportional iterate: try a CG step along p (a new run: p = phi, or z)
         if (restart) then
@@ -486,7 +457,7 @@ contains
           ! CG step, then p <- phi - beta_cg p with beta_cg = phi^T A p / p^T A p
           ! (preconditioned: p <- z - beta_cg p, beta_cg = z^T A p / p^T A p)
           call take_step(problem, x, g, alpha_cg, self%p, self%ap)
-          call problem%track_step(alpha_cg)
+          call x_moved(problem, moved_along_argument, alpha_cg)
           self%n_cg = self%n_cg + 1
           last_kind = step_cg
           if (self%preconditioned) then
@@ -508,7 +479,7 @@ contains
           call self%ritz%end_run()
           ! expansion step: half step to the boundary, then the projected gradient step
           call take_step(problem, x, g, alpha_f, self%p, self%ap)
-          call problem%track_step(alpha_f)
+          call x_moved(problem, moved_along_argument, alpha_f)
           self%n_expansion = self%n_expansion + 1
           last_kind = step_expansion
           call expand(self, problem, b_lin, x, g, max_hessian)
@@ -525,7 +496,7 @@ contains
         if (.not. step_along_p(self, problem, g, .true., 'beta', 'beta^T A beta or g^T beta', 'proportioning', &
                                pap, alpha_cg)) exit
         call take_step(problem, x, g, alpha_cg, self%p, self%ap)
-        call problem%track_step(alpha_cg)
+        call x_moved(problem, moved_along_argument, alpha_cg)
         self%n_proportioning = self%n_proportioning + 1
         last_kind = step_proportioning
         call gradient_part(problem, x, g, .false., self%p)
@@ -535,6 +506,60 @@ contains
     end do
     call self%ritz%end_run()
   end subroutine minimize
+
+  !> At the top of an iteration of minimize (stats: split_stats at x): ||g^P||
+  !> recorded, then true (status set) when it is not finite, when the
+  !> caller's stopping rule holds or when the product cap is reached.
+  logical function stops_here(self, problem, x, g, stats, stop_rule, last_kind, max_hessian) result(done)
+    class(mprgp_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(in) :: x(:), g(:), stats(4)
+    class(inner_stop_t), intent(inout) :: stop_rule
+    integer, intent(in) :: last_kind
+    integer(ip), intent(in) :: max_hessian
+    real(dp) :: gp
+    logical :: stop
+    done = .true.
+    gp = sqrt(stats(1) + stats(2))
+    self%gp_norm = gp
+    if (.not. all(ieee_is_finite(stats))) then
+      call set_status(self, qp_status_not_finite, 'non-finite value in ||g^P||', self%n_iterations)
+      return
+    end if
+    if (gp < self%best_gp_norm) then
+      self%best_gp_norm = gp
+      self%n_best = self%n_iterations
+    end if
+    call stop_rule%observe(last_kind, self%n_hessian, gp)
+    call stop_rule%test(problem, x, g, gp, stop)
+    if (stop) then
+      call set_status(self, qp_status_converged, 'converged (stopping rule met)', self%n_iterations)
+      return
+    end if
+    if (self%n_hessian >= max_hessian) then
+      call set_status(self, qp_status_max_hessian, 'Hessian multiplication cap reached', max_hessian)
+      return
+    end if
+    done = .false.
+  end function stops_here
+
+  !> The first step of this MPRGP: the problem's better ||A|| (deferred
+  !> Lanczos, dual_problem%refined_norm) before alpha_bar is used; stats
+  !> again with the new alpha_bar.
+  subroutine refine_norm(self, problem, x, g, stats)
+    class(mprgp_t), intent(inout) :: self
+    class(qp_problem_t), intent(inout) :: problem
+    real(dp), intent(in) :: x(:), g(:)
+    real(dp), intent(inout) :: stats(4)
+    real(dp) :: a_refined
+    self%norm_refined = .true.
+    a_refined = problem%refined_norm()
+    if (a_refined > self%a_norm) then
+      self%a_norm = a_refined
+      self%alpha_bar = self%alpha_scale/self%a_norm
+      call split_stats(self, problem, x, g, stats)
+    end if
+  end subroutine refine_norm
 
   !> After a CG step: p <- d - beta_cg p on the free set (d = phi, or z when
   !> preconditioned), beta_cg recorded for the Ritz values. .false. (status
@@ -561,8 +586,8 @@ contains
     class(mprgp_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
     switched = .false.
-    if (.not. problem%watches_condition()) return
-    call problem%condition_estimate(max(self%ritz%max_ratio, self%ritz%current_ratio()), switched)
+    if (.not. problem%prec%watches()) return
+    call problem%prec%condition(max(self%ritz%max_ratio, self%ritz%current_ratio()), switched)
     if (switched) self%n_switches = self%n_switches + 1
   end function preconditioner_switched
 
@@ -586,7 +611,7 @@ contains
     real(dp), intent(inout) :: work(:), z(:)
     integer(ip) :: i
     call gradient_part(problem, x, g, .false., work)
-    call problem%precondition(work, z)
+    call problem%prec%apply(work, z)
     do i = 1, problem%n
       if (.not. x(i) > problem%lower(i)) z(i) = 0
     end do
@@ -637,7 +662,7 @@ contains
       self%w_g(1:n) = g(1:n)
       call projected_step(problem, self%w_x, alpha_e, self%w_phi, x)
       call apply_hessian(self, problem, x, g)
-      call problem%track_last()
+      call x_moved(problem, moved_to_argument)
       g(1:n) = g(1:n) - b_lin(1:n)
       hi = 0
       lo = 0
@@ -650,19 +675,19 @@ contains
         if (max_hessian - self%n_hessian >= 1) then
           call projected_step(problem, self%w_x, self%alpha_bar, self%w_phi, x)
           call apply_hessian(self, problem, x, g)
-          call problem%track_last()
+          call x_moved(problem, moved_to_argument)
           g(1:n) = g(1:n) - b_lin(1:n)
         else
           x(1:n) = self%w_x(1:n)
           g(1:n) = self%w_g(1:n)
-          call problem%track_reset()
+          call x_moved(problem, moved_other)
         end if
       end if
     else
       self%w_x(1:n) = x(1:n)
       call projected_step(problem, self%w_x, self%alpha_bar, self%w_phi, x)
       call apply_hessian(self, problem, x, g)
-      call problem%track_last()
+      call x_moved(problem, moved_to_argument)
       g(1:n) = g(1:n) - b_lin(1:n)
     end if
   end subroutine expand

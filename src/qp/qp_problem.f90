@@ -8,62 +8,27 @@
 !> (= -huge(1.0_dp)) means that x_i is unbounded below; any other bound must be
 !> of moderate size (x_i - l_i is formed without overflow checks).
 !>
-!> The equality constraint C x = 0 (C with orthonormal rows) is never seen as a
-!> matrix. A problem with `has_equality` provides it in "hat" form, so that the
-!> FETI dual (C = L^{-1} G with G G^T = L L^T) never needs the factor L:
-!> - `eq_size()`: length m of the multiplier vector (replicated on every rank);
-!> - `eq_residual(x, z, cnorm)`: cnorm = ||C x|| and z (length m, replicated)
-!>   such that the multiplier update mu <- mu + rho C x reads
-!>   muhat <- muhat + rho z. Orthonormal explicit C: z = C x. FETI:
-!>   z = (G G^T)^{-1} G x and cnorm^2 = (G x)^T z;
-!> - `eq_apply_t(muhat, y)`: y = C^T mu, the local slice (FETI: y = G^T muhat).
-!> With an equality constraint the Hessian A applied by `hessian` already
-!> contains the penalty rho C^T C (FETI: A = P F P + rho Q, Q = C^T C), and
-!> `penalty()` returns that rho (> 0).
-!>
-!> Every type-bound procedure is collective over `comm` unless stated otherwise.
-!>
-!> Preconditioner (optional): a problem whose `has_preconditioner()` is true
-!> provides `precondition(r, z)`, z = M_A^{-1} r with M_A^{-1} symmetric
-!> positive definite (an approximate inverse of A); MPRGP then uses it in the
-!> face (its CG steps; mprgp). The QP layer knows nothing else of it.
-!> A problem may change its preconditioner during a solve (an adaptive
-!> choice, `&solver preconditioner = 'auto'`): while `watches_condition()`
-!> is true, MPRGP hands it after every preconditioned CG step the running
-!> condition estimate of the preconditioned face operator (the Ritz values
-!> of the CG coefficients, the same on every rank: ritz_values), through
-!> `condition_estimate(kappa, switched)`; switched = .true. says that the
-!> preconditioner changed, and MPRGP restarts its CG direction (as on a
-!> change of the face). By default nobody watches and nothing changes.
-!>
-!> Face solver (optional, SMALBE's polish step): a problem with an equality
-!> constraint whose `has_face_solver()` is true can restrict C to the free
-!> rows F of an active set: `face_init(free, reused)` prepares C_F C_F^T (free:
-!> the local mask of F; `reused`: the last face's matrices were those and are
-!> kept), `face_coefficient(y, c)` gives the multiplier-form
-!> coefficients c (length eq_size, the form eq_apply_t takes) of the least
-!> squares fit (C_F C_F^T)^{-1} C y, so that the face projector onto
-!> {y : y_A = 0, C y = 0} reads P_F y = y_F - (eq_apply_t(c))_F for c of y_F
-!> (see face_solve), and `face_free()` releases it. Problems without it never
-!> polish. Two optional shortcuts for vectors of the face (C p = 0, p_A = 0),
-!> `face_operator(p, q)`, q = A p for p on the face (default: the Hessian;
-!> a problem may save work there) and `face_precondition(r, z)`, used only
-!> as P_F z, an SPD preconditioner on the face (default: precondition).
-!> A third one: a problem whose `face_lazy()` is true gives by
-!> `face_operator_lazy(p, q)` A p plus some vector C^T c of the range of C^T
-!> (cheaper: the FETI dual skips its projector), and by
-!> `eq_range_coefficient(y, c)` the coefficients of the orthogonal projection
-!> of y onto that range, (C C^T)^{-1} C y in the form eq_apply_t takes; the
-!> face solve then carries the extra terms in its gradient (P_F removes them)
-!> and takes them out every few steps and at the end (face_solve's fold).
+!> Optional parts, each its own small type held as a component (not
+!> allocated: the problem has no such part); the solvers use only the parts
+!> they need:
+!> - `eq` (qp_equality_t): the equality constraint C x = 0 (C with
+!>   orthonormal rows, in hat form), the penalty rho C^T C that the Hessian
+!>   then contains, and the equality measure of the stopping test; SMALBE
+!>   needs it, MPRGP ignores it (it only tells it how x moved);
+!> - `prec` (qp_preconditioner_t): M_A^{-1}, which MPRGP and the face solve
+!>   use in their CG steps (and its condition watch);
+!> - `face` (qp_face_t): the face solver of SMALBE's polish (C restricted to
+!>   the free rows of an active set); problems without it never polish.
+!> `refined_norm` (||A|| estimated more accurately when first needed) is the
+!> one optional binding of the problem itself.
 !>
 !> Stopping test (what the solvers compare with tol): by default the classical
 !> ||g^P|| <= tol ||b|| and ||C x|| <= tol ||b|| in the 2-norm. A problem that
 !> allocates `stop_weight` (w_i > 0, local slice) asks instead for a test per
 !> component: max_i w_i |v^P_i| <= tol S, v = g - rho C^T C x the gradient
 !> without its penalty part, S = `stop_scale` if the problem sets it, else
-!> max_i w_i |b_i|; and C x = 0 measured by `eq_measure`: by default
-!> max(w) ||C x|| <= tol S, or, for a problem with `relative_eq_measure`, its
+!> max_i w_i |b_i|; and C x = 0 measured by `eq%measure`: by default
+!> max(w) ||C x|| <= tol S, or, for a constraint with `relative_measure`, its
 !> own dimensionless measure <= tol (the FETI dual: the largest relative force
 !> imbalance of a subdomain). The FETI dual sets w = 1/(row scale), so that the
 !> test bounds the largest constraint violation of the reconstructed
@@ -85,12 +50,16 @@ module qp_problem
   use, intrinsic :: iso_c_binding, only: c_ptr, c_f_pointer
   use kinds, only: dp, ip, MPI_REAL_DP, MPI_INT_IP
   use errors, only: fatal_error
+  use qp_equality, only: qp_equality_t, moved_other, moved_to_argument, moved_along_argument
+  use qp_preconditioner, only: qp_preconditioner_t
+  use qp_face, only: qp_face_t
   use mpi_f08, only: MPI_Comm, MPI_COMM_NULL, MPI_Allreduce, MPI_SUM, MPI_MIN, MPI_MAX, MPI_Datatype, MPI_Op, &
                      MPI_Type_contiguous, MPI_Type_commit, MPI_Op_create
   implicit none
   private
 
-  public :: qp_status_name, compensated_add
+  public :: qp_status_name, compensated_add, x_moved
+  public :: moved_other, moved_to_argument, moved_along_argument
 
   real(dp), parameter, public :: no_lower_bound = -huge(1.0_dp)  !< l_i of an unbounded x_i
 
@@ -112,47 +81,23 @@ module qp_problem
   integer, parameter, public :: qp_status_incompatible = 5  !< the solver refused the problem
 
   !> A distributed QP with lower bounds and optionally C x = 0 (see the module).
-  !> Extensions must override `hessian`; problems with an equality constraint
-  !> also override `penalty`, `eq_size`, `eq_residual` and `eq_apply_t`.
+  !> Extensions override `hessian` and allocate the parts they have.
   type, abstract, public :: qp_problem_t
     type(MPI_Comm) :: comm = MPI_COMM_NULL     !< communicator of the distributed vectors
     integer(ip) :: n = 0                       !< local length of x, b, lower on this rank
     real(dp), allocatable :: b(:)              !< linear term (local slice)
     real(dp), allocatable :: lower(:)          !< lower bounds l (local slice), no_lower_bound if none
-    logical :: has_equality = .false.          !< the constraint C x = 0 is present
     !> weights of the per-component stopping test (see the module); not
     !> allocated: the classical 2-norm test
     real(dp), allocatable :: stop_weight(:)
     !> the scale that per-component test compares with; 0: max_i w_i |b_i|
     real(dp) :: stop_scale = 0
-    !> eq_measure is relative (compared with tol itself), not ||C x||
-    logical :: relative_eq_measure = .false.
+    class(qp_equality_t), allocatable :: eq          !< C x = 0 and the penalty (optional)
+    class(qp_preconditioner_t), allocatable :: prec  !< M_A^{-1} (optional)
+    class(qp_face_t), allocatable :: face            !< the face solver of the polish (optional)
   contains
     procedure(hessian_iface), deferred :: hessian
-    procedure :: penalty => default_penalty
-    procedure :: set_penalty => default_set_penalty
-    procedure :: eq_size => default_eq_size
-    procedure :: eq_residual => default_eq_residual
-    procedure :: eq_apply_t => default_eq_apply_t
-    procedure :: track_last => default_track
-    procedure :: track_step => default_track_step
-    procedure :: track_reset => default_track
-    procedure :: eq_measure => default_eq_measure
-    procedure :: has_preconditioner => default_has_preconditioner
     procedure :: refined_norm => default_refined_norm
-    procedure :: precondition => default_precondition
-    procedure :: watches_condition => default_watches_condition
-    procedure :: condition_estimate => default_condition_estimate
-    procedure :: has_face_solver => default_has_face_solver
-    procedure :: face_always_regular => default_face_always_regular
-    procedure :: face_init => default_face_init
-    procedure :: face_coefficient => default_face_coefficient
-    procedure :: face_free => default_face_free
-    procedure :: face_operator => default_face_operator
-    procedure :: face_lazy => default_face_lazy
-    procedure :: face_operator_lazy => default_face_operator_lazy
-    procedure :: eq_range_coefficient => default_eq_range_coefficient
-    procedure :: face_precondition => default_face_precondition
     procedure :: init_base
     procedure :: free_base
     procedure :: dot
@@ -214,7 +159,7 @@ module qp_problem
 contains
 
   !> Set the communicator and the local length; allocate b = 0 and
-  !> lower = no_lower_bound; no equality. Extensions call this in their init.
+  !> lower = no_lower_bound; no parts. Extensions call this in their init.
   subroutine init_base(self, comm, n)
     class(qp_problem_t), intent(inout) :: self
     type(MPI_Comm), intent(in) :: comm
@@ -234,66 +179,13 @@ contains
     if (allocated(self%b)) deallocate (self%b)
     if (allocated(self%lower)) deallocate (self%lower)
     if (allocated(self%stop_weight)) deallocate (self%stop_weight)
+    if (allocated(self%eq)) deallocate (self%eq)
+    if (allocated(self%prec)) deallocate (self%prec)
+    if (allocated(self%face)) deallocate (self%face)
     self%stop_scale = 0
     self%n = 0
-    self%has_equality = .false.
     self%comm = MPI_COMM_NULL
   end subroutine free_base
-
-  !> Penalty rho contained in the Hessian: 0 without equality constraint; a
-  !> problem with one must override this.
-  real(dp) function default_penalty(self)
-    class(qp_problem_t), intent(in) :: self
-    default_penalty = 0
-    if (self%has_equality) call fatal_error('qp_problem: has_equality but penalty() not provided')
-  end function default_penalty
-
-  !> Change the penalty rho in the Hessian (A <- A + (rho - penalty()) C^T C);
-  !> needed only by a solver that raises rho (SMALBE with rho_growth > 1).
-  !> Not local-only: problems may communicate.
-  subroutine default_set_penalty(self, rho)
-    class(qp_problem_t), intent(inout) :: self
-    real(dp), intent(in) :: rho
-    if (rho /= self%penalty()) call fatal_error('qp_problem: this problem cannot change its penalty (set_penalty)')
-  end subroutine default_set_penalty
-
-  !> Length of the multiplier vector: 0 without equality constraint; a
-  !> problem with one must override this.
-  integer(ip) function default_eq_size(self)
-    class(qp_problem_t), intent(in) :: self
-    default_eq_size = 0
-    if (self%has_equality) call fatal_error('qp_problem: has_equality but eq_size() not provided')
-  end function default_eq_size
-
-  subroutine default_eq_residual(self, x, z, cnorm)
-    class(qp_problem_t), intent(inout) :: self
-    real(dp), intent(in) :: x(:)
-    real(dp), intent(out) :: z(:)
-    real(dp), intent(out) :: cnorm
-    character(len=80) :: sizes
-    write (sizes, '(3(a,i0))') 'n = ', self%n, ', size(x) = ', size(x), ', size(z) = ', size(z)
-    call fatal_error('qp_problem: eq_residual not provided by this problem ('//trim(sizes)//')')
-    z = 0
-    cnorm = 0
-  end subroutine default_eq_residual
-
-  subroutine default_eq_apply_t(self, muhat, y)
-    class(qp_problem_t), intent(inout) :: self
-    real(dp), intent(in) :: muhat(:)
-    real(dp), intent(out) :: y(:)
-    call not_provided(self, 'eq_apply_t', 'muhat', size(muhat))
-    y = 0
-  end subroutine default_eq_apply_t
-
-  !> The per-component stopping test's measure of C x = 0 at x, where
-  !> eq_residual(x) gave cnorm = ||C x|| (and was the last call of it):
-  !> ||C x|| by default.
-  real(dp) function default_eq_measure(self, x, cnorm)
-    class(qp_problem_t), intent(inout) :: self
-    real(dp), intent(in) :: x(:)
-    real(dp), intent(in) :: cnorm
-    default_eq_measure = cnorm
-  end function default_eq_measure
 
   !> ||A|| from an estimate made more accurate now, for MPRGP's step length
   !> when it is first needed (a problem that defers its norm estimate, as
@@ -302,148 +194,16 @@ contains
   real(dp) function default_refined_norm(self)
     class(qp_problem_t), intent(inout) :: self
     default_refined_norm = 0
-    if (self%n < 0) default_refined_norm = -1   ! never: keeps self referenced
   end function default_refined_norm
 
-  !> False: no preconditioner (MPRGP's CG steps use the free gradient).
-  !> Local, no communication.
-  logical function default_has_preconditioner(self)
-    class(qp_problem_t), intent(in) :: self
-    default_has_preconditioner = .false.
-    if (self%n < 0) default_has_preconditioner = .true.   ! never: keeps self referenced
-  end function default_has_preconditioner
-
-  !> z = M_A^{-1} r (local slices; collective): the identity by default.
-  subroutine default_precondition(self, r, z)
-    class(qp_problem_t), intent(inout) :: self
-    real(dp), intent(in) :: r(:)
-    real(dp), intent(out) :: z(:)
-    z(1:self%n) = r(1:self%n)
-  end subroutine default_precondition
-
-  !> False: the preconditioner never changes. Local, no communication.
-  logical function default_watches_condition(self)
-    class(qp_problem_t), intent(in) :: self
-    default_watches_condition = .false.
-    if (self%n < 0) default_watches_condition = .true.   ! never: keeps self referenced
-  end function default_watches_condition
-
-  !> The running condition estimate kappa of the preconditioned face
-  !> operator (globally reduced); switched = .true. when the problem changed
-  !> its preconditioner in response. Never by default. Collective when
-  !> watches_condition() is true.
-  subroutine default_condition_estimate(self, kappa, switched)
-    class(qp_problem_t), intent(inout) :: self
-    real(dp), intent(in) :: kappa
-    logical, intent(out) :: switched
-    switched = .false.
-    if (self%n < 0 .and. kappa < 0) switched = .true.   ! never: keeps the arguments referenced
-  end subroutine default_condition_estimate
-
-  !> False: no face solver (SMALBE never polishes). Local, no communication.
-  logical function default_has_face_solver(self)
-    class(qp_problem_t), intent(in) :: self
-    default_has_face_solver = .false.
-    if (self%n < 0) default_has_face_solver = .true.   ! never: keeps self referenced
-  end function default_has_face_solver
-
-  !> False: C_F C_F^T may be singular when every bounded row is at its bound
-  !> (the equality rows alone need not determine the multipliers), so SMALBE
-  !> does not polish that face. True where the problem knows that the
-  !> equality rows alone give a regular C_E C_E^T (then every C_F C_F^T is
-  !> regular). Local, no communication.
-  logical function default_face_always_regular(self)
-    class(qp_problem_t), intent(in) :: self
-    default_face_always_regular = .false.
-    if (self%n < 0) default_face_always_regular = .true.   ! never: keeps self referenced
-  end function default_face_always_regular
-
-  !> Prepare C_F C_F^T for the free rows `free` (local mask). Collective.
-  subroutine default_face_init(self, free, reused)
-    class(qp_problem_t), intent(inout) :: self
-    logical, intent(in) :: free(:)
-    logical, intent(out), optional :: reused
-    if (present(reused)) reused = .false.
-    call not_provided(self, 'face_init', 'free', size(free))
-  end subroutine default_face_init
-
-  !> c = (C_F C_F^T)^{-1} C y in the form eq_apply_t takes. Collective.
-  subroutine default_face_coefficient(self, y, c)
-    class(qp_problem_t), intent(inout) :: self
-    real(dp), intent(in) :: y(:)
-    real(dp), intent(out) :: c(:)
-    call not_provided(self, 'face_coefficient', 'y', size(y))
-    c = 0
-  end subroutine default_face_coefficient
-
-  !> q = A p for p on the face (C p = 0): the Hessian by default.
-  subroutine default_face_operator(self, p, q)
-    class(qp_problem_t), intent(inout) :: self
-    real(dp), intent(in) :: p(:)
-    real(dp), intent(out) :: q(:)
-    call self%hessian(p, q)
-  end subroutine default_face_operator
-
-  !> face_operator_lazy leaves a term in the range of C^T: not by default.
-  logical function default_face_lazy(self)
-    class(qp_problem_t), intent(in) :: self
-    default_face_lazy = .false.
-    if (self%n < 0) default_face_lazy = .true.   ! never: keeps self referenced
-  end function default_face_lazy
-
-  !> q = A p (+ a term C^T c) for p on the face: face_operator by default.
-  subroutine default_face_operator_lazy(self, p, q)
-    class(qp_problem_t), intent(inout) :: self
-    real(dp), intent(in) :: p(:)
-    real(dp), intent(out) :: q(:)
-    call self%face_operator(p, q)
-  end subroutine default_face_operator_lazy
-
-  !> c = (C C^T)^{-1} C y: needed only by a problem whose face_lazy() is true.
-  subroutine default_eq_range_coefficient(self, y, c)
-    class(qp_problem_t), intent(inout) :: self
-    real(dp), intent(in) :: y(:)
-    real(dp), intent(out) :: c(:)
-    call not_provided(self, 'eq_range_coefficient', 'y', size(y))
-    c = 0
-  end subroutine default_eq_range_coefficient
-
-  !> Stop with the message of a default binding that the problem had to override:
-  !> `what` not provided, with n and the size m of the argument `arg`.
-  subroutine not_provided(self, what, arg, m)
-    class(qp_problem_t), intent(in) :: self
-    character(len=*), intent(in) :: what, arg
-    integer, intent(in) :: m
-    character(len=80) :: sizes
-    write (sizes, '(a,i0,a,i0)') 'n = ', self%n, ', size('//arg//') = ', m
-    call fatal_error('qp_problem: '//what//' not provided by this problem ('//trim(sizes)//')')
-  end subroutine not_provided
-
-  !> The face's preconditioner before P_F: precondition by default.
-  subroutine default_face_precondition(self, r, z)
-    class(qp_problem_t), intent(inout) :: self
-    real(dp), intent(in) :: r(:)
-    real(dp), intent(out) :: z(:)
-    call self%precondition(r, z)
-  end subroutine default_face_precondition
-
-  !> Release what face_init prepared (nothing by default).
-  subroutine default_face_free(self)
-    class(qp_problem_t), intent(inout) :: self
-  end subroutine default_face_free
-
-  !> Optional bookkeeping of C x that a problem may keep so that eq_residual
-  !> needs no new work: the solver calls track_last when x has become the
-  !> argument v of the last `hessian` call, track_step(alpha) when x moved to
-  !> x - alpha v, and track_reset when x changed otherwise. No-ops by default.
-  subroutine default_track(self)
-    class(qp_problem_t), intent(inout) :: self
-  end subroutine default_track
-
-  subroutine default_track_step(self, alpha)
-    class(qp_problem_t), intent(inout) :: self
-    real(dp), intent(in) :: alpha
-  end subroutine default_track_step
+  !> The solvers' notice to the equality constraint (if any) of how x
+  !> changed (qp_equality: moved; alpha with moved_along_argument).
+  subroutine x_moved(problem, how, alpha)
+    class(qp_problem_t), intent(inout) :: problem
+    integer, intent(in) :: how
+    real(dp), intent(in), optional :: alpha
+    if (allocated(problem%eq)) call problem%eq%moved(how, alpha)
+  end subroutine x_moved
 
   !> Global x^T y (compensated, independent of the distribution).
   real(dp) function dot(self, x, y)

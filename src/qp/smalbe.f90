@@ -5,7 +5,7 @@
 !>
 !>     min 1/2 x^T A x - b^T x   s.t.  x >= l,  C x = 0,
 !>
-!> where A already contains the penalty rho C^T C (rho = problem%penalty()).
+!> where A already contains the penalty rho C^T C (rho = problem%eq%penalty()).
 !> The augmented Lagrangian is therefore
 !>
 !>     L(x, mu) = 1/2 x^T A x - b^T x + mu^T C x
@@ -13,8 +13,8 @@
 !>
 !> and the inner problem of outer iteration k is the bound constrained QP
 !> with Hessian A and linear term b - C^T mu_k. mu is carried in hat form
-!> (see qp_problem): C^T mu = eq_apply_t(muhat), and mu <- mu + rho C x is
-!> muhat <- muhat + rho z with z from eq_residual.
+!> (see qp_problem): C^T mu = eq%apply_t(muhat), and mu <- mu + rho C x is
+!> muhat <- muhat + rho z with z from eq%residual.
 !>
 !> Outer iteration k (M_0 = m_scale ||A||, eta = eta_scale ||b||):
 !> 1. x_k: the inner solver from x_{k-1} (warm start, the gradient updated
@@ -57,7 +57,7 @@
 !> decided by round-off.
 !> When b = 0, ||b|| is replaced by 1 in tol ||b|| and eta.
 !>
-!> ||C x|| costs one eq_residual (for FETI: one coarse problem solve). The
+!> ||C x|| costs one eq%residual (for FETI: one coarse problem solve). The
 !> inner stopping rule evaluates it only when ||g^P|| <= max(eta, tol ||b||),
 !> since otherwise neither inner criterion can hold (counted in n_eq_residual).
 !>
@@ -93,6 +93,8 @@ module smalbe
   use inner_solver, only: inner_solver_t, inner_stop_t
   use mprgp, only: mprgp_t, mprgp_settings_t, ensure_size
   use active_set_polish, only: active_set_polish_t, polish_settings_t
+  use outer_step, only: outer_state_t
+  use face_recycle, only: face_recycle_t
   use solver_monitor, only: solver_monitor_t
   implicit none
   private
@@ -171,16 +173,16 @@ module smalbe
     class(inner_solver_t), allocatable :: inner   !< inner solver (its counters: the last inner solve)
     type(active_set_polish_t) :: polish        !< the optional outer step (active when settings%polish%window > 0)
     real(dp) :: a_norm = 0                     !< ||A|| (penalty included)
-    real(dp) :: rho_initial = 0                !< problem%penalty() at the start of the last solve
+    real(dp) :: rho_initial = 0                !< problem%eq%penalty() at the start of the last solve
     integer(ip) :: n_rho_updates = 0           !< times rho was raised
     ! results of the last solve
-    real(dp), allocatable :: muhat(:)          !< final multiplier, hat form (C^T mu = eq_apply_t(muhat))
-    !> when allocated with eq_size entries, the next solve starts from this
+    real(dp), allocatable :: muhat(:)          !< final multiplier, hat form (C^T mu = eq%apply_t(muhat))
+    !> when allocated with eq%size() entries, the next solve starts from this
     !> multiplier instead of 0 (and deallocates it): a warm start
     real(dp), allocatable :: muhat_start(:)
     real(dp) :: cnorm = 0                      !< ||C x|| at the returned x
     real(dp) :: lagrangian = 0                 !< L(x, mu) at the returned pair
-    real(dp) :: rho = 0                        !< problem%penalty()
+    real(dp) :: rho = 0                        !< problem%eq%penalty()
     real(dp) :: norm_b = 0                     !< ||b||
     real(dp) :: tol_abs = 0                    !< tol ||b||
     logical :: per_component = .false.         !< the problem's per-component stopping test is used
@@ -226,6 +228,10 @@ module smalbe
     procedure :: solve => smalbe_solve
     procedure :: is_compatible => smalbe_is_compatible
     procedure :: report => smalbe_report
+    procedure :: warm_start
+    procedure :: recycle_directions
+    procedure :: kept_directions
+    procedure :: reuse_counts
   end type smalbe_t
 
 contains
@@ -254,7 +260,7 @@ contains
     else
       if (gp_norm > max(self%eta, self%tol_gp)) return
     end if
-    call problem%eq_residual(x, self%z, self%cnorm)
+    call problem%eq%residual(x, self%z, self%cnorm)
     self%n_eq_residual = self%n_eq_residual + 1
     self%evaluated = .true.
     if (.not. ieee_is_finite(self%cnorm)) then
@@ -297,7 +303,7 @@ contains
   end subroutine inner_stop_observe
 
   !> gp_measure and eq_measure at x (g the gradient there; z and cnorm of
-  !> eq_residual at x already computed). Classical: ||g^P|| and ||C x||.
+  !> eq%residual at x already computed). Classical: ||g^P|| and ||C x||.
   !> Per-component: max_i w_i |v^P_i| with v = g - rho C^T C x, the gradient
   !> without its penalty part (for the FETI dual: the constraint violation of
   !> the displacements the multipliers define), and problem%eq_measure.
@@ -317,10 +323,10 @@ contains
       if (size(self%work) /= n) deallocate (self%work)
     end if
     if (.not. allocated(self%work)) allocate (self%work(n))
-    call problem%eq_apply_t(self%z, self%work)
+    call problem%eq%apply_t(self%z, self%work)
     self%work(1:n) = g(1:n) - self%rho*self%work(1:n)
     self%gp_measure = problem%projected_gradient_max(x, self%work)
-    self%eq_measure = problem%eq_measure(x, self%cnorm)
+    self%eq_measure = problem%eq%measure(x, self%cnorm)
   end subroutine outer_measures
 
   !> The outer criterion on the measures of the last evaluation.
@@ -495,13 +501,13 @@ contains
     smalbe_is_compatible = .false.
     if (self%a_norm <= 0) then
       reason = 'SMALBE is not initialized (call init first)'
-    else if (.not. problem%has_equality) then
-      reason = 'SMALBE needs the equality constraint C x = 0 (has_equality is false; use MPRGP)'
-    else if (.not. (problem%penalty() > 0)) then
-      write (buf, '(es10.3)') problem%penalty()
+    else if (.not. allocated(problem%eq)) then
+      reason = 'SMALBE needs the equality constraint C x = 0 (no eq part; use MPRGP)'
+    else if (.not. (problem%eq%penalty() > 0)) then
+      write (buf, '(es10.3)') problem%eq%penalty()
       reason = 'SMALBE needs a penalty rho > 0 in the Hessian (penalty() = '//trim(adjustl(buf))//')'
-    else if (problem%eq_size() < 1) then
-      reason = 'SMALBE needs at least one multiplier (eq_size() < 1)'
+    else if (problem%eq%size() < 1) then
+      reason = 'SMALBE needs at least one multiplier (eq%size() < 1)'
     else if (.not. (allocated(problem%b) .and. allocated(problem%lower))) then
       reason = 'the problem has no b or lower bounds (not initialized)'
     else if (size(problem%b) < problem%n .or. size(problem%lower) < problem%n) then
@@ -524,7 +530,8 @@ contains
     character(len=qp_message_len) :: reason
     real(dp) :: change
     integer(ip) :: outer
-    logical :: gradient_given, ran, restored
+    logical :: gradient_given, polished
+    type(outer_state_t) :: st
 
     call reset_counters(self)
     if (.not. self%is_compatible(problem, reason)) then
@@ -534,19 +541,19 @@ contains
       return
     end if
     if (size(x) < problem%n) call fatal_error('smalbe: x shorter than the local length of the problem')
-    call prepare(self, problem, x)
+    call prepare(self, problem, x, st)
     gradient_given = .false.
     if (self%monitor) call monitor_header(self)
 
     self%status = qp_status_not_run
     ! 0. the polish first (active_set_polish): SMALBE from its pair, or, given up in its first
     ! round, from that x (the inner solver computes the gradient)
-    call self%polish%first_face(problem, x, self%gradient, self%muhat, self%b_lin, self%ct_mu, self%tol_gp, &
-                                self%per_component, self%n_hessian, self%settings%max_hessian, &
-                                self%n_preconditioner, ran, restored)
-    if (ran) then
-      self%after_polish = .not. restored
-      gradient_given = .not. restored
+    call lend(self, st)
+    call self%polish%first(problem, x, st)
+    call take_back(self, st)
+    if (st%ran) then
+      self%after_polish = .not. st%restored
+      gradient_given = .not. st%restored
     end if
     do outer = 1, self%settings%max_outer
       ! 1. the inner problem
@@ -557,7 +564,9 @@ contains
                                                           self%eq_measure, self%tol_c, self%rho, &
                                                           problem%count_at_bound(x))
       ! the active set: unchanged for how many outer iterations (polish)
-      call self%polish%track(problem, x, outer, self%inner%n_iterations > 0)
+      st%outer = outer
+      st%moved = self%inner%n_iterations > 0
+      call self%polish%after_outer(problem, x, st)
       ! 2. outer stopping criterion, caps
       if (outer_stop(self, outer)) exit
       ! 3. - 5.
@@ -565,14 +574,13 @@ contains
       call update_m(self, outer, change)
       call update_penalty(self, problem, outer)
       ! 6. the polish: the exact solve on a face that has settled
-      if (self%polish%due(problem, x, self%n_hessian, self%settings%max_hessian)) then
-        call self%polish%polish(problem, x, outer, self%gradient, self%muhat, self%b_lin, self%ct_mu, self%tol_gp, &
-                                self%per_component, self%n_hessian, self%settings%max_hessian, &
-                                self%n_preconditioner, restored)
-        if (.not. restored) then
-          self%after_polish = .true.
-          self%l_shift = 0
-        end if
+      call lend(self, st)
+      polished = self%polish%due(problem, x, st)
+      if (polished) call self%polish%step(problem, x, st)
+      call take_back(self, st)
+      if (polished .and. .not. st%restored) then
+        self%after_polish = .true.
+        self%l_shift = 0
       end if
     end do
     self%n_eq_residual = self%rule%n_eq_residual
@@ -580,16 +588,78 @@ contains
     call monitor_summary(self)
   end subroutine smalbe_solve
 
+  !> SMALBE's pair and counters handed to the outer step's state for a call
+  !> (the vectors moved, not copied; take_back returns them).
+  subroutine lend(self, st)
+    class(smalbe_t), intent(inout) :: self
+    type(outer_state_t), intent(inout) :: st
+    call move_alloc(self%gradient, st%g)
+    call move_alloc(self%muhat, st%muhat)
+    call move_alloc(self%b_lin, st%b_lin)
+    call move_alloc(self%ct_mu, st%ct_mu)
+    st%tol_gp = self%tol_gp
+    st%per_component = self%per_component
+    st%n_hessian = self%n_hessian
+    st%max_hessian = self%settings%max_hessian
+    st%n_preconditioner = self%n_preconditioner
+  end subroutine lend
+
+  !> The pair and counters back from the outer step's state.
+  subroutine take_back(self, st)
+    class(smalbe_t), intent(inout) :: self
+    type(outer_state_t), intent(inout) :: st
+    call move_alloc(st%g, self%gradient)
+    call move_alloc(st%muhat, self%muhat)
+    call move_alloc(st%b_lin, self%b_lin)
+    call move_alloc(st%ct_mu, self%ct_mu)
+    self%n_hessian = st%n_hessian
+    self%n_preconditioner = st%n_preconditioner
+  end subroutine take_back
+
+  !> A warm start (a load history): the next solve starts from the multiplier
+  !> muhat (eq%size() entries, else ignored) instead of 0, and the polish
+  !> first from the face of the given x.
+  subroutine warm_start(self, muhat)
+    class(smalbe_t), intent(inout) :: self
+    real(dp), intent(in) :: muhat(:)
+    self%muhat_start = muhat
+  end subroutine warm_start
+
+  !> Keep the face CG directions of the polish's face solves for the later
+  !> solves with the same Hessian (face_recycle; a load history), or not.
+  subroutine recycle_directions(self, on)
+    class(smalbe_t), intent(inout) :: self
+    logical, intent(in) :: on
+    self%polish%face%recycle%on = on
+  end subroutine recycle_directions
+
+  !> The kept face CG directions (to save in a checkpoint or to read one into).
+  function kept_directions(self) result(kept)
+    class(smalbe_t), intent(inout), target :: self
+    type(face_recycle_t), pointer :: kept
+    kept => self%polish%face%recycle
+  end function kept_directions
+
+  !> Of the last solve: face solves on the face before (its matrices reused)
+  !> and kept directions the face solves' starts used.
+  subroutine reuse_counts(self, faces_reused, recycled)
+    class(smalbe_t), intent(in) :: self
+    integer(ip), intent(out) :: faces_reused, recycled
+    faces_reused = self%polish%n_faces_reused
+    recycled = self%polish%n_recycled
+  end subroutine reuse_counts
+
   !> Work vectors, the penalty, the tolerances and M_0, muhat = 0, the inner
   !> stopping rule, the polish's state; x projected onto the bounds.
-  subroutine prepare(self, problem, x)
+  subroutine prepare(self, problem, x, st)
     class(smalbe_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
     real(dp), intent(inout) :: x(:)
+    type(outer_state_t), intent(inout) :: st
     real(dp) :: scale
     integer(ip) :: n, m
     n = problem%n
-    m = problem%eq_size()
+    m = problem%eq%size()
     call ensure_size(self%gradient, n)
     call ensure_size(self%b_lin, n)
     call ensure_size(self%ct_mu, n)
@@ -598,13 +668,14 @@ contains
     call ensure_size(self%g_prev, n)
     call ensure_size(self%muhat, m)
     call ensure_size(self%rule%z, m)
-    call self%polish%start(problem, n, self%monitor)
     ! a warm start (muhat_start): the polish first starts from the face of x
-    self%polish%warm_face = allocated(self%muhat_start)
+    st%monitor = self%monitor
+    st%warm = allocated(self%muhat_start)
+    call self%polish%start(problem, st)
 
-    self%rho = problem%penalty()
+    self%rho = problem%eq%penalty()
     self%rho_initial = self%rho
-    self%preconditioned = problem%has_preconditioner()
+    self%preconditioned = allocated(problem%prec)
     call self%inner%ritz%reset()
     call self%inner%norm_at_least(self%rho)
     call problem%project(x)
@@ -622,7 +693,7 @@ contains
       if (self%tol_gp <= 0) self%tol_gp = 1
       self%tol_gp = self%settings%tol*self%tol_gp
       self%rule%w_max = problem%weighted_max(spread(1.0_dp, 1, problem%n))
-      if (problem%relative_eq_measure) then
+      if (problem%eq%relative_measure) then
         self%tol_c = self%settings%tol
       else
         self%tol_c = self%tol_gp/max(self%rule%w_max, tiny(1.0_dp))
@@ -640,7 +711,7 @@ contains
       ! a warm start (a load history): the multiplier of the previous solve
       if (size(self%muhat_start) == m) then
         self%muhat = self%muhat_start
-        call problem%eq_apply_t(self%muhat, self%ct_mu)
+        call problem%eq%apply_t(self%muhat, self%ct_mu)
         self%b_lin(1:n) = problem%b(1:n) - self%ct_mu(1:n)
       end if
       deallocate (self%muhat_start)
@@ -719,7 +790,7 @@ contains
     character(len=qp_message_len) :: buf
     ! z and ||C x|| at the final x: from the stopping rule when it stopped the loop
     if (.not. (self%inner%status == qp_status_converged .and. self%rule%evaluated)) then
-      call problem%eq_residual(x, self%rule%z, self%rule%cnorm)
+      call problem%eq%residual(x, self%rule%z, self%rule%cnorm)
       self%rule%n_eq_residual = self%rule%n_eq_residual + 1
     end if
     self%cnorm = self%rule%cnorm
@@ -787,7 +858,7 @@ contains
     class(qp_problem_t), intent(inout) :: problem
     integer(ip) :: i
     self%muhat = self%muhat + self%rho*self%rule%z
-    call problem%eq_apply_t(self%muhat, self%ct_new)
+    call problem%eq%apply_t(self%muhat, self%ct_new)
     do i = 1, problem%n
       self%gradient(i) = self%gradient(i) + (self%ct_new(i) - self%ct_mu(i))
       self%ct_mu(i) = self%ct_new(i)
@@ -835,7 +906,7 @@ contains
   !> rho_contraction^w ||C x_{k-w}||; w = 1: the last one), at least w outer
   !> iterations after the last raise and after an inner solve that made a
   !> step, rho <- rho_growth rho (at most smalbe_rho_cap rho_0). A gains (rho - rho_old) C^T C, so does the
-  !> gradient at x_k (no Hessian product: C^T C x = eq_apply_t(z)); the
+  !> gradient at x_k (no Hessian product: C^T C x = eq%apply_t(z)); the
   !> inner ||A|| estimate becomes max(||A||, rho) (A_0 and C^T C act on
   !> complementary subspaces). L(x_k, mu_{k+1}) grows by
   !> (rho - rho_old)/2 ||C x_k||^2, which the next test of step 4 includes.
@@ -862,8 +933,8 @@ contains
     if (.not. raise) return
     rho_old = self%rho
     self%rho = self%settings%rho_growth*self%rho
-    call problem%set_penalty(self%rho)
-    call problem%eq_apply_t(self%rule%z, self%ct_new)
+    call problem%eq%set_penalty(self%rho)
+    call problem%eq%apply_t(self%rule%z, self%ct_new)
     do i = 1, problem%n
       self%gradient(i) = self%gradient(i) + (self%rho - rho_old)*self%ct_new(i)
     end do

@@ -21,6 +21,8 @@ module qp_test_problems
   use kinds, only: dp, ip, MPI_REAL_DP
   use errors, only: fatal_error
   use qp_problem, only: qp_problem_t, no_lower_bound
+  use qp_equality, only: qp_equality_t
+  use qp_face, only: qp_face_t
   use smalbe, only: smalbe_settings_t
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Allgatherv
   implicit none
@@ -54,24 +56,36 @@ module qp_test_problems
     real(dp), allocatable :: x_global(:)
     integer(ip) :: n_hessian_calls = 0
     integer(ip) :: poison_after = -1
-    !> face solver hooks (SMALBE's polish) on: C_F C_F^T by a dense Cholesky factorization
-    logical :: face_enabled = .false.
     real(dp), allocatable :: face_chol(:, :)   !< lower Cholesky factor of C_F C_F^T
   contains
     procedure :: create
     procedure :: gather
+    procedure :: enable_face
     procedure :: hessian => dense_hessian
+  end type dense_qp_t
+
+  !> The parts of the dense QP (qp_problem): C from its matrix, and the face
+  !> solver by a dense Cholesky factorization of C_F C_F^T; each works on its
+  !> owner's data (the owner must stay where it is while they live).
+  type, extends(qp_equality_t) :: dense_equality_t
+    class(dense_qp_t), pointer :: owner => null()
+  contains
+    procedure :: size => dense_eq_size
+    procedure :: residual => dense_eq_residual
+    procedure :: apply_t => dense_eq_apply_t
     procedure :: penalty => dense_penalty
     procedure :: set_penalty => dense_set_penalty
-    procedure :: eq_size => dense_eq_size
-    procedure :: eq_residual => dense_eq_residual
-    procedure :: eq_apply_t => dense_eq_apply_t
-    procedure :: has_face_solver => dense_has_face_solver
-    procedure :: face_always_regular => dense_face_always_regular
-    procedure :: face_init => dense_face_init
-    procedure :: face_coefficient => dense_face_coefficient
-    procedure :: face_free => dense_face_free
-  end type dense_qp_t
+  end type dense_equality_t
+
+  type, extends(qp_face_t) :: dense_face_t
+    class(dense_qp_t), pointer :: owner => null()
+  contains
+    procedure :: init => dense_face_init
+    procedure :: coefficient => dense_face_coefficient
+    procedure :: apply => dense_face_apply
+    procedure :: release => dense_face_free
+    procedure :: regular => dense_face_regular
+  end type dense_face_t
 
 contains
 
@@ -183,7 +197,7 @@ contains
   !> The slice of `cs` owned by this rank of comm (rows split as evenly as
   !> possible, the first ranks get one more). with_equality = .false. drops C.
   subroutine create(self, comm, cs, with_equality)
-    class(dense_qp_t), intent(inout) :: self
+    class(dense_qp_t), intent(inout), target :: self
     type(MPI_Comm), intent(in) :: comm
     type(qp_case_t), intent(in) :: cs
     logical, intent(in) :: with_equality
@@ -213,10 +227,14 @@ contains
     self%x_global = cs%b
     self%n_hessian_calls = 0
     self%poison_after = -1
-    self%has_equality = with_equality .and. cs%m > 0
     self%m = 0
     self%rho = 0
-    if (self%has_equality) then
+    if (with_equality .and. cs%m > 0) then
+      allocate (dense_equality_t :: self%eq)
+      select type (part => self%eq)
+      type is (dense_equality_t)
+        part%owner => self
+      end select
       self%m = cs%m
       self%rho = cs%rho
       self%orthonormal = cs%orthonormal
@@ -264,104 +282,132 @@ contains
       y(1:self%n) = ieee_value(1.0_dp, ieee_quiet_nan)
   end subroutine dense_hessian
 
+  !> The face solver (SMALBE's polish) on or off: C_F C_F^T by a dense
+  !> Cholesky factorization (the test cases keep m well below the free rows:
+  !> every C_F has full row rank, the face is regular).
+  subroutine enable_face(self, on)
+    class(dense_qp_t), intent(inout), target :: self
+    logical, intent(in) :: on
+    if (allocated(self%face)) deallocate (self%face)
+    if (.not. (on .and. allocated(self%eq))) return
+    allocate (dense_face_t :: self%face)
+    select type (part => self%face)
+    type is (dense_face_t)
+      part%owner => self
+    end select
+  end subroutine enable_face
+
   real(dp) function dense_penalty(self)
-    class(dense_qp_t), intent(in) :: self
-    dense_penalty = self%rho
+    class(dense_equality_t), intent(in) :: self
+    dense_penalty = self%owner%rho
   end function dense_penalty
 
   !> A <- A + (rho - penalty()) Q: the penalty raised (or lowered) to rho.
   subroutine dense_set_penalty(self, rho)
-    class(dense_qp_t), intent(inout) :: self
+    class(dense_equality_t), intent(inout) :: self
     real(dp), intent(in) :: rho
-    self%a_rows = self%a_rows + (rho - self%rho)*self%q_rows
-    self%rho = rho
+    associate (o => self%owner)
+      o%a_rows = o%a_rows + (rho - o%rho)*o%q_rows
+      o%rho = rho
+    end associate
   end subroutine dense_set_penalty
 
   integer(ip) function dense_eq_size(self)
-    class(dense_qp_t), intent(in) :: self
-    dense_eq_size = self%m
+    class(dense_equality_t), intent(in) :: self
+    dense_eq_size = self%owner%m
   end function dense_eq_size
 
   !> cnorm = ||C~ x||, z = C x (orthonormal rows) or (C C^T)^{-1} C x.
   subroutine dense_eq_residual(self, x, z, cnorm)
-    class(dense_qp_t), intent(inout) :: self
+    class(dense_equality_t), intent(inout) :: self
     real(dp), intent(in) :: x(:)
     real(dp), intent(out) :: z(:)
     real(dp), intent(out) :: cnorm
-    real(dp) :: cx(self%m)
+    real(dp) :: cx(self%owner%m)
     integer :: ierr
     integer(ip) :: k
-    ! C x from the gathered x (a fixed summation order on every rank count)
-    call MPI_Allgatherv(x, int(self%n), MPI_REAL_DP, self%x_global, self%counts, self%displs, MPI_REAL_DP, &
-                        self%comm, ierr)
-    do k = 1, self%m
-      cx(k) = dot_product(self%c_full(k, :), self%x_global)
-    end do
-    if (self%orthonormal) then
-      z(1:self%m) = cx
-    else
-      z(1:self%m) = cholesky_solve(self%cct_chol, cx)
-    end if
-    cnorm = sqrt(max(dot_product(cx, z(1:self%m)), 0.0_dp))
+    associate (o => self%owner)
+      ! C x from the gathered x (a fixed summation order on every rank count)
+      call MPI_Allgatherv(x, int(o%n), MPI_REAL_DP, o%x_global, o%counts, o%displs, MPI_REAL_DP, &
+                          o%comm, ierr)
+      do k = 1, o%m
+        cx(k) = dot_product(o%c_full(k, :), o%x_global)
+      end do
+      if (o%orthonormal) then
+        z(1:o%m) = cx
+      else
+        z(1:o%m) = cholesky_solve(o%cct_chol, cx)
+      end if
+      cnorm = sqrt(max(dot_product(cx, z(1:o%m)), 0.0_dp))
+    end associate
   end subroutine dense_eq_residual
 
   !> y = C^T muhat (local rows).
   subroutine dense_eq_apply_t(self, muhat, y)
-    class(dense_qp_t), intent(inout) :: self
+    class(dense_equality_t), intent(inout) :: self
     real(dp), intent(in) :: muhat(:)
     real(dp), intent(out) :: y(:)
-    y(1:self%n) = matmul(transpose(self%c_cols), muhat(1:self%m))
+    associate (o => self%owner)
+      y(1:o%n) = matmul(transpose(o%c_cols), muhat(1:o%m))
+    end associate
   end subroutine dense_eq_apply_t
 
-  logical function dense_has_face_solver(self)
-    class(dense_qp_t), intent(in) :: self
-    dense_has_face_solver = self%face_enabled .and. self%has_equality
-  end function dense_has_face_solver
-
-  !> The test cases keep m well below the free rows: C_F has full row rank.
-  logical function dense_face_always_regular(self)
-    class(dense_qp_t), intent(in) :: self
-    dense_face_always_regular = self%face_enabled
-  end function dense_face_always_regular
+  !> Regular: see enable_face.
+  logical function dense_face_regular(self)
+    class(dense_face_t), intent(in) :: self
+    dense_face_regular = associated(self%owner)
+  end function dense_face_regular
 
   !> C_F C_F^T of the free rows (local mask `free`, gathered), factorized.
   subroutine dense_face_init(self, free, reused)
-    class(dense_qp_t), intent(inout) :: self
+    class(dense_face_t), intent(inout) :: self
     logical, intent(in) :: free(:)
     logical, intent(out), optional :: reused
     real(dp), allocatable :: mask(:), cf(:, :)
     integer(ip) :: j
     if (present(reused)) reused = .false.
-    allocate (mask(self%n_global))
-    call self%gather(merge(1.0_dp, 0.0_dp, free(1:self%n)), mask)
-    cf = self%c_full
-    do j = 1, self%n_global
-      cf(:, j) = mask(j)*cf(:, j)
-    end do
-    self%face_chol = matmul(cf, transpose(cf))
-    call cholesky(self%face_chol)
-    do j = 1, self%m
-      self%face_chol(1:j - 1, j) = 0
-    end do
+    associate (o => self%owner)
+      allocate (mask(o%n_global))
+      call o%gather(merge(1.0_dp, 0.0_dp, free(1:o%n)), mask)
+      cf = o%c_full
+      do j = 1, o%n_global
+        cf(:, j) = mask(j)*cf(:, j)
+      end do
+      o%face_chol = matmul(cf, transpose(cf))
+      call cholesky(o%face_chol)
+      do j = 1, o%m
+        o%face_chol(1:j - 1, j) = 0
+      end do
+    end associate
   end subroutine dense_face_init
 
-  !> c = (C_F C_F^T)^{-1} C y (y the whole local slice), the form eq_apply_t takes.
-  subroutine dense_face_coefficient(self, y, c)
-    class(dense_qp_t), intent(inout) :: self
-    real(dp), intent(in) :: y(:)
-    real(dp), intent(out) :: c(:)
-    real(dp) :: cy(self%m)
+  !> c = (C_F C_F^T)^{-1} C y (y the whole local slice), the form apply_t takes.
+  subroutine dense_face_coefficient(self, x, y)
+    class(dense_face_t), intent(inout) :: self
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(out) :: y(:)
+    real(dp) :: cy(self%owner%m)
     integer(ip) :: k
-    call self%gather(y(1:self%n), self%x_global)
-    do k = 1, self%m
-      cy(k) = dot_product(self%c_full(k, :), self%x_global)
-    end do
-    c(1:self%m) = cholesky_solve(self%face_chol, cy)
+    associate (o => self%owner)
+      call o%gather(x(1:o%n), o%x_global)
+      do k = 1, o%m
+        cy(k) = dot_product(o%c_full(k, :), o%x_global)
+      end do
+      y(1:o%m) = cholesky_solve(o%face_chol, cy)
+    end associate
   end subroutine dense_face_coefficient
 
+  !> q = A p: the Hessian.
+  subroutine dense_face_apply(self, x, y)
+    class(dense_face_t), intent(inout) :: self
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(out) :: y(:)
+    call self%owner%hessian(x, y)
+  end subroutine dense_face_apply
+
   subroutine dense_face_free(self)
-    class(dense_qp_t), intent(inout) :: self
-    if (allocated(self%face_chol)) deallocate (self%face_chol)
+    class(dense_face_t), intent(inout) :: self
+    if (allocated(self%owner%face_chol)) deallocate (self%owner%face_chol)
   end subroutine dense_face_free
 
   ! ---- small dense helpers -------------------------------------------------
