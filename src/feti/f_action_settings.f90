@@ -5,16 +5,19 @@
 module f_action_settings
   use kinds, only: ip, name_len
   use text, only: lower_case, ints_text
+  use settings_base, only: settings_t, refuse
   implicit none
   private
 
-  type, public :: f_action_settings_t
+  type, extends(settings_t), public :: f_action_settings_t
     !> how F is applied: 'implicit' (K^+ solves) | 'explicit' (dense local
     character(len=name_len) :: f_action = 'auto'  !< operators, BLAS) | 'auto' (the cheaper one by the measured cost model)
     character(len=name_len) :: f_storage = 'packed'  !< explicit F: 'packed' | 'symmetric' | 'general'
     integer(ip) :: lanczos_steps = 50  !< cap of the ||P F P|| Lanczos steps
   contains
     procedure :: check => f_action_settings_check
+    procedure :: group => f_action_settings_group
+    procedure :: variables => f_action_settings_variables
     procedure :: read_namelist => f_action_settings_read
     procedure :: write_namelist => f_action_settings_write
   end type f_action_settings_t
@@ -30,20 +33,28 @@ contains
     rule = ''
     got = ''
     if (.not. any(self%f_action == [character(len=10) :: 'implicit', 'explicit', 'auto'])) then
-      call bad('f_action', "must be 'implicit', 'explicit' or 'auto'", self%f_action)
+      call refuse('f_action', "must be 'implicit', 'explicit' or 'auto'", self%f_action, variable, rule, got)
     else if (.not. any(self%f_storage == [character(len=10) :: 'symmetric', 'packed', 'general'])) then
-      call bad('f_storage', "must be 'symmetric', 'packed' or 'general'", self%f_storage)
+      call refuse('f_storage', "must be 'symmetric', 'packed' or 'general'", self%f_storage, &
+                   variable, rule, got)
     else if (self%lanczos_steps < 1) then
-      call bad('lanczos_steps', 'must be >= 1', ints_text([self%lanczos_steps]))
+      call refuse('lanczos_steps', 'must be >= 1', ints_text([self%lanczos_steps]), variable, rule, got)
     end if
-  contains
-    subroutine bad(name, text, value)
-      character(len=*), intent(in) :: name, text, value
-      variable = name
-      rule = text
-      got = trim(value)
-    end subroutine bad
   end subroutine f_action_settings_check
+
+  !> The namelist group of these variables.
+  function f_action_settings_group(self) result(name)
+    class(f_action_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'solver'
+  end function f_action_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine f_action_settings_variables(self, names)
+    class(f_action_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'f_action', 'f_storage', 'lanczos_steps']
+  end subroutine f_action_settings_variables
 
   !> Read this component's variables from the group text `group`
   !> ('&solver ... /'); strings lower case.
