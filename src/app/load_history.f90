@@ -22,6 +22,7 @@ module load_history
   use tfeti_dualization, only: tfeti_dualization_t, dual_solution_t
   use feti_operators, only: feti_t, feti_sizes_t
   use subdomain, only: subdomain_t
+  use decomposition, only: decomposition_t
   use contact_summary, only: contact_summary_t, summarize_contact
   use hdf5_output, only: check_output_directory
   use field_output, only: write_run_fields
@@ -48,11 +49,13 @@ contains
 
   !> Run the history of `p` on `comm`; `status` 0 when every step converged
   !> and passed the KKT check (also when a time limit or a signal stopped
-  !> the run after a step), else that of the failed step.
-  subroutine run_load_history(p, comm, status)
+  !> the run after a step), else that of the failed step. `units`: the
+  !> decomposition of the checks (run_checks::check_run).
+  subroutine run_load_history(p, comm, status, units)
     type(params_t), intent(in) :: p
     type(MPI_Comm), intent(in) :: comm
     integer, intent(out) :: status
+    type(decomposition_t), intent(in), optional :: units
     type(tfeti_dualization_t), target :: dual
     type(feti_t), pointer :: op
     type(smalbe_t) :: solver
@@ -77,7 +80,7 @@ contains
     call MPI_Barrier(comm, ierr)
     t_start = MPI_Wtime()
     call timer_start('total')
-    call dual%setup(feti_settings_of(p), p%solver%dual, p%solver%preconditioner, p%reconstruction, comm)
+    call dual%setup(feti_settings_of(p), p%solver%dual, p%solver%preconditioner, p%reconstruction, comm, units)
     call dual%prepare_history()
     call memory_mark('dual QP setup')
     op => dual%operators()
