@@ -1,6 +1,7 @@
 !> The settings of the F action (`&solver` variables f_action, f_storage,
-!> lanczos_steps; docs/INPUT.md): how F = B K^+ B^T is applied and stored,
-!> and the cap of the Lanczos steps that estimate ||P F P||. The one home of
+!> lanczos_steps, lanczos_setup_steps; docs/INPUT.md): how F = B K^+ B^T is
+!> applied and stored, the cap of the Lanczos steps that estimate ||P F P||
+!> and how many of them set-up makes. The one home of
 !> their defaults, ranges and namelist variables; used by feti_builder.
 module f_action_settings
   use kinds, only: ip, name_len
@@ -14,6 +15,9 @@ module f_action_settings
     character(len=name_len) :: f_action = 'auto'  !< operators, BLAS) | 'auto' (the cheaper one by the measured cost model)
     character(len=name_len) :: f_storage = 'packed'  !< explicit F: 'packed' | 'symmetric' | 'general'
     integer(ip) :: lanczos_steps = 50  !< cap of the ||P F P|| Lanczos steps
+    !> the Lanczos steps made in set-up, at most lanczos_steps (their estimate scales the dual
+    !> problem); the rest when MPRGP first needs its step length (docs/THEORY.md "Deferred Lanczos")
+    integer(ip) :: lanczos_setup_steps = 3
   contains
     procedure :: check => f_action_settings_check
     procedure :: group => f_action_settings_group
@@ -39,6 +43,9 @@ contains
                    variable, rule, got)
     else if (self%lanczos_steps < 1) then
       call refuse('lanczos_steps', 'must be >= 1', ints_text([self%lanczos_steps]), variable, rule, got)
+    else if (self%lanczos_setup_steps < 1) then
+      call refuse('lanczos_setup_steps', 'must be >= 1 (at most lanczos_steps are made)', &
+                  ints_text([self%lanczos_setup_steps]), variable, rule, got)
     end if
   end subroutine f_action_settings_check
 
@@ -53,7 +60,7 @@ contains
   subroutine f_action_settings_variables(self, names)
     class(f_action_settings_t), intent(in) :: self
     character(len=name_len), allocatable, intent(out) :: names(:)
-    names = [character(len=name_len) :: 'f_action', 'f_storage', 'lanczos_steps']
+    names = [character(len=name_len) :: 'f_action', 'f_storage', 'lanczos_steps', 'lanczos_setup_steps']
   end subroutine f_action_settings_variables
 
   !> Read this component's variables from the group text `group`
@@ -64,13 +71,14 @@ contains
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
     character(len=name_len) :: f_action, f_storage
-    integer(ip) :: lanczos_steps
-    namelist /solver/ f_action, f_storage, lanczos_steps
+    integer(ip) :: lanczos_steps, lanczos_setup_steps
+    namelist /solver/ f_action, f_storage, lanczos_steps, lanczos_setup_steps
     f_action = self%f_action; f_storage = self%f_storage; lanczos_steps = self%lanczos_steps
+    lanczos_setup_steps = self%lanczos_setup_steps
     read (group, nml=solver, iostat=status, iomsg=msg)
     if (status /= 0) return
     self%f_action = lower_case(f_action); self%f_storage = lower_case(f_storage)
-    self%lanczos_steps = lanczos_steps
+    self%lanczos_steps = lanczos_steps; self%lanczos_setup_steps = lanczos_setup_steps
   end subroutine f_action_settings_read
 
   !> Write this component's variables as the namelist '&solver ... /' (strings quoted).
@@ -80,9 +88,10 @@ contains
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
     character(len=name_len) :: f_action, f_storage
-    integer(ip) :: lanczos_steps
-    namelist /solver/ f_action, f_storage, lanczos_steps
+    integer(ip) :: lanczos_steps, lanczos_setup_steps
+    namelist /solver/ f_action, f_storage, lanczos_steps, lanczos_setup_steps
     f_action = self%f_action; f_storage = self%f_storage; lanczos_steps = self%lanczos_steps
+    lanczos_setup_steps = self%lanczos_setup_steps
     lines = ''
     write (lines, nml=solver, delim='quote', iostat=status, iomsg=msg)
   end subroutine f_action_settings_write

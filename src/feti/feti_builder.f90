@@ -17,11 +17,6 @@ submodule(feti_operators) feti_builder
   use mpi_f08, only: MPI_MAX
   implicit none
 
-  !> Lanczos steps of the ||P F P|| estimate made in set-up; the rest (to its
-  !> stopping rule) when MPRGP first needs its step length, i.e. never in a
-  !> run that the polish solves alone (docs/THEORY.md "Deferred Lanczos").
-  integer(ip), parameter :: lanczos_setup_steps = 3
-
 contains
 
   module subroutine setup(this, settings, comm, units)
@@ -125,7 +120,7 @@ contains
 
     call timer_start('dual setup')
     call dual_data(this, comm)
-    call estimate_norm_pfp(this, settings%f_action%lanczos_steps, lanczos_setup_steps)
+    call estimate_norm_pfp(this, settings%f_action%lanczos_steps, settings%f_action%lanczos_setup_steps)
     call timer_stop('dual setup')
     call memory_mark('dual setup')
 
@@ -320,7 +315,7 @@ contains
   !> orthogonality only repeats converged Ritz values, it does not move them
   !> above lambda_max. The estimate scales the dual problem and sets the MPRGP
   !> step 1.9/||A||, which tolerates an underestimate of 5%.
-  !> Deferred: set-up makes `steps` (lanczos_setup_steps)
+  !> Deferred: set-up makes `steps` (&solver lanczos_setup_steps)
   !> of them, whose theta (a lower bound) scales the dual problem; the process
   !> is kept and continued to the stopping rule by refine_norm_pfp when MPRGP
   !> first needs its step length (dual_problem%refined_norm).
