@@ -239,7 +239,7 @@ contains
       end if
     end do
     do k = 1, n
-      if (.not. under_same_label(k)) mine(ntree + phase_of(k)) = mine(ntree + phase_of(k)) + mine(row_of(k))
+      if (.not. under_same_label(up, labels, k)) mine(ntree + phase_of(k)) = mine(ntree + phase_of(k)) + mine(row_of(k))
     end do
     call MPI_Allreduce(mine, lo, nrows, MPI_REAL_DP, MPI_MIN, comm, ierr)
     call MPI_Allreduce(mine, hi, nrows, MPI_REAL_DP, MPI_MAX, comm, ierr)
@@ -251,9 +251,9 @@ contains
     do i = 1, ntree
       k = abs(order(i))
       if (order(i) > 0) then
-        stats(i) = timer_stat_t(row=row_tree, label=labels(k), depth=depth_of(k), parent=parent_row(k))
+        stats(i) = timer_stat_t(row=row_tree, label=labels(k), depth=depth_of(up, k), parent=parent_row(up, row_of, k))
       else
-        stats(i) = timer_stat_t(row=row_other, label='other', depth=depth_of(k) + 1, parent=row_of(k))
+        stats(i) = timer_stat_t(row=row_other, label='other', depth=depth_of(up, k) + 1, parent=row_of(k))
       end if
       stats(i)%min = lo(i)
       stats(i)%max = hi(i)
@@ -290,35 +290,40 @@ contains
       end if
     end subroutine visit
 
-    integer function depth_of(k)
-      integer, intent(in) :: k
-      integer :: j
-      depth_of = 0
-      j = up(k)
-      do while (j > 0)
-        depth_of = depth_of + 1
-        j = up(j)
-      end do
-    end function depth_of
-
-    integer function parent_row(k)
-      integer, intent(in) :: k
-      parent_row = 0
-      if (up(k) > 0) parent_row = row_of(up(k))
-    end function parent_row
-
-    logical function under_same_label(k)
-      integer, intent(in) :: k
-      integer :: j
-      under_same_label = .true.
-      j = up(k)
-      do while (j > 0)
-        if (labels(j) == labels(k)) return
-        j = up(j)
-      end do
-      under_same_label = .false.
-    end function under_same_label
   end subroutine timers_reduce
+
+  !> The depth of path `k` in the tree of parents `up` (0 at a root).
+  pure integer function depth_of(up, k)
+    integer, intent(in) :: up(:), k
+    integer :: j
+    depth_of = 0
+    j = up(k)
+    do while (j > 0)
+      depth_of = depth_of + 1
+      j = up(j)
+    end do
+  end function depth_of
+
+  !> The row of the parent of path `k` (0 at a root).
+  pure integer function parent_row(up, row_of, k)
+    integer, intent(in) :: up(:), row_of(:), k
+    parent_row = 0
+    if (up(k) > 0) parent_row = row_of(up(k))
+  end function parent_row
+
+  !> Path `k` lies under a path of the same label (its time is counted there).
+  pure logical function under_same_label(up, labels, k)
+    integer, intent(in) :: up(:), k
+    character(len=*), intent(in) :: labels(:)
+    integer :: j
+    under_same_label = .true.
+    j = up(k)
+    do while (j > 0)
+      if (labels(j) == labels(k)) return
+      j = up(j)
+    end do
+    under_same_label = .false.
+  end function under_same_label
 
   !> Each path's label (its last name) and parent (its position in `keys`,
   !> 0 for a root); parents come before their children in `keys`.

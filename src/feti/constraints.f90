@@ -147,14 +147,14 @@ contains
     integer :: ierr, rank
     logical :: filling
     integer(ip) :: cslot   ! visit -> emit: the unit's position in the node's unit list
-    real(dp), allocatable :: sub_weight(:)   ! w of every subdomain (copy_weights)
+    real(dp), allocatable :: sub_weight(:)   ! w of every subdomain (subdomain_weights)
 
     con%comm = comm
     call MPI_Comm_rank(comm, rank, ierr)
     me = rank
 
     ! 1. Records of every B entry of the local subdomains (count, then fill).
-    call subdomain_weights()
+    sub_weight = subdomain_weights(settings, dec)
     nrec = 0
     call visit(.false.)
     allocate (rec(nrec))
@@ -205,7 +205,7 @@ contains
             if (m == 1 .and. .not. (any(dirichlet) .or. contact)) cycle
             j = findloc(copies(1:m), s_id, 1)
             owner = dec%subdomain_rank(copies(1))
-            call copy_weights(copies(1:m), w(1:m))
+            w(1:m) = sub_weight(copies(1:m))   ! E(s)/young with &solver scaling = 'young', else 1
             cslot = j
           end if
           do comp = 1, 3
@@ -214,26 +214,17 @@ contains
                         row_dirichlet, j, sqrt(w(j)), sqrt(w(j))*value(comp), sqrt(w(j)), sqrt(w(j)))
             else if (all(w(1:m) == 1)) then
               do k = max(1, j - 1), m - 1
-                if (j <= k) then
-                  call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, j, 1/sqrt(real(k*(k + 1), dp)), 0.0_dp, 1.0_dp, sqrt(k/real(k + 1, dp)))
-                else
-                  call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, j, -k/sqrt(real(k*(k + 1), dp)), 0.0_dp, 1.0_dp, sqrt(k/real(k + 1, dp)))
-                end if
+                call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, gid, row_gluing, j, &
+                          merge(1.0_dp, -real(k, dp), j <= k)/sqrt(real(k*(k + 1), dp)), 0.0_dp, 1.0_dp, &
+                          sqrt(k/real(k + 1, dp)))
               end do
             else
               ! weighted Helmert rows (see the module header)
               do k = max(1, j - 1), m - 1
                 sk = sum(w(1:k))
                 alpha = 1/sqrt(sk*(1 + sk/w(k + 1)))
-                if (j <= k) then
-                  call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, j, alpha*w(j), 0.0_dp, 1.0_dp, alpha*sk)
-                else
-                  call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, j, -alpha*sk, 0.0_dp, 1.0_dp, alpha*sk)
-                end if
+                call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, gid, row_gluing, j, &
+                          merge(alpha*w(j), -alpha*sk, j <= k), 0.0_dp, 1.0_dp, alpha*sk)
               end do
             end if
           end do
@@ -247,28 +238,6 @@ contains
       end do
     end subroutine visit
 
-    !> w_c = E(s_c)/young for the copies' subdomains with &solver scaling =
-    !> 'young', else 1 (sub_weight).
-    subroutine copy_weights(ids, w)
-      integer(ip), intent(in) :: ids(:)
-      real(dp), intent(out) :: w(:)
-      w = sub_weight(ids)
-    end subroutine copy_weights
-
-    !> sub_weight(s) = E(s)/young for every subdomain with &solver scaling = 'young', else 1.
-    !> From the parameters alone: the same on every rank.
-    subroutine subdomain_weights()
-      integer(ip) :: s
-      real(dp) :: young, nu
-      allocate (sub_weight(dec%nsubdomains))
-      sub_weight = 1
-      if (settings%scaling%scaling /= 'young') return
-      do s = 1, dec%nsubdomains
-        call subdomain_material(settings%material, dec, s, young, nu)
-        sub_weight(s) = young/settings%material%young
-      end do
-    end subroutine subdomain_weights
-
     subroutine emit(key, owner, ls, dof, node, gid, kind, slot, val, c, scale, unit)
       integer(i8), intent(in) :: key
       integer, intent(in) :: owner
@@ -278,6 +247,23 @@ contains
       if (filling) rec(nrec) = record_t(key, owner, ls, dof, node, gid, kind, slot, cslot, val, c, scale, unit)
     end subroutine emit
   end subroutine build_constraints
+
+  !> E(s)/young for every subdomain s with &solver scaling = 'young', else 1.
+  !> From the parameters alone: the same on every rank.
+  function subdomain_weights(settings, dec) result(w)
+    type(feti_settings_t), intent(in) :: settings
+    type(decomposition_t), intent(in) :: dec
+    real(dp), allocatable :: w(:)
+    integer(ip) :: s
+    real(dp) :: young, nu
+    allocate (w(dec%nsubdomains))
+    w = 1
+    if (settings%scaling%scaling /= 'young') return
+    do s = 1, dec%nsubdomains
+      call subdomain_material(settings%material, dec, s, young, nu)
+      w(s) = young/settings%material%young
+    end do
+  end function subdomain_weights
 
   !> The unique rows of the records `rec` in key order: `row_of_rec` the
   !> row of each record, `urow_first` the first record of each row (sorted

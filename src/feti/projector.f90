@@ -221,14 +221,11 @@ contains
     type(coarse_problem_t), pointer :: cp
     type(constraints_t), pointer :: con
     logical, allocatable :: contact(:)
-    integer(ip) :: k_mine, k, i, j
+    integer(ip) :: k
     integer(ip) :: local(2), total(2)
-    integer :: ierr, rank
+    integer :: ierr
     real(dp) :: flops, entries
     logical :: cheap
-    real(dp), allocatable :: col(:), wloc(:), v(:, :)
-    integer(ip) :: ls, e, offset, c_mine, c_offset, c
-    integer(i8), allocatable :: my_keys(:), keys(:)
 
     con => b%constraints()
     contact = con%kind(1:con%n_own) == row_contact
@@ -276,44 +273,7 @@ contains
         end if
         this%masked_mode = masked_base
       end if
-      ! V: column j is G e_r for the j-th contact row r of the mask (global order: rank, then row)
-      k_mine = local(1)
-      offset = 0
-      call MPI_Exscan(k_mine, offset, 1, MPI_INT_IP, MPI_SUM, this%comm, ierr)
-      call MPI_Comm_rank(this%comm, rank, ierr)
-      if (rank == 0) offset = 0                  ! MPI_Exscan leaves rank 0's result undefined
-      ! keys: the global ordinal of each contact row (rank, then row), so that the update of
-      ! the next face finds the columns of this one (coarse_problem%set_update)
-      c_mine = count(contact, kind=ip)
-      c_offset = 0
-      call MPI_Exscan(c_mine, c_offset, 1, MPI_INT_IP, MPI_SUM, this%comm, ierr)
-      if (rank == 0) c_offset = 0
-      allocate (col(con%n_own), wloc(con%n_local), v(6*this%layout%nlocal, k), my_keys(k_mine))
-      col = 0
-      j = offset
-      c = c_offset
-      do i = 1, con%n_own
-        if (contact(i)) c = c + 1
-        if (mask(i) .and. contact(i)) then
-          j = j + 1
-          col(i) = real(j, dp)
-          my_keys(j - offset) = int(c, i8)
-        end if
-      end do
-      keys = gather_keys(my_keys, k)
-      call con%exchange%gather(col, wloc)
-      v = 0
-      do ls = 1, size(con%b, kind=ip)
-        associate (bs => con%b(ls))
-          do e = 1, bs%nentries
-            j = nint(wloc(bs%row(e)), ip)
-            if (j > 0) v(6*ls - 5:6*ls, j) = v(6*ls - 5:6*ls, j) + bs%g(:, e)
-          end do
-        end associate
-      end do
-      call timer_start('face: update')
-      call this%masked%set_update(v, keys)
-      call timer_stop('face: update')
+      call low_rank_update(this, con, mask, contact, local(1), k)
     else
       if (this%masked%is_reusable()) then
         call this%masked%refactorize(dec, con, mask)
@@ -337,19 +297,71 @@ contains
       all_rows = all(mask(1:n))
       call MPI_Allreduce(MPI_IN_PLACE, all_rows, 1, MPI_LOGICAL, MPI_LAND, this%comm, ierr)
     end function all_rows
-
-    !> The keys of all ranks in rank order (k of them in all). Collective.
-    function gather_keys(mine, k) result(all)
-      integer(i8), intent(in) :: mine(:)
-      integer(ip), intent(in) :: k
-      integer(i8) :: all(k)
-      integer :: n_mine
-      integer, allocatable :: counts(:), displs(:)
-      n_mine = size(mine)
-      call gathered_counts(n_mine, this%comm, counts, displs)
-      call MPI_Allgatherv(mine, n_mine, MPI_INTEGER8, all, counts, displs, MPI_INTEGER8, this%comm, ierr)
-    end function gather_keys
   end function masked_coarse
+
+  !> The low-rank update of masked_coarse: G_M G_M^T = G_E G_E^T + V V^T with
+  !> V's column j = G e_r for the j-th contact row r of `mask` (global order:
+  !> rank, then row), `k_mine` of them on this rank, `k` in all. Collective.
+  subroutine low_rank_update(this, con, mask, contact, k_mine, k)
+    class(projector_t), intent(inout) :: this
+    type(constraints_t), intent(inout) :: con
+    logical, intent(in) :: mask(:), contact(:)
+    integer(ip), intent(in) :: k_mine, k
+    real(dp), allocatable :: col(:), wloc(:), v(:, :)
+    integer(ip) :: ls, e, offset, c_mine, c_offset, c, i, j
+    integer(i8), allocatable :: my_keys(:), keys(:)
+    integer :: ierr, rank
+    ! V: column j is G e_r for the j-th contact row r of the mask (global order: rank, then row)
+    offset = 0
+    call MPI_Exscan(k_mine, offset, 1, MPI_INT_IP, MPI_SUM, this%comm, ierr)
+    call MPI_Comm_rank(this%comm, rank, ierr)
+    if (rank == 0) offset = 0                  ! MPI_Exscan leaves rank 0's result undefined
+    ! keys: the global ordinal of each contact row (rank, then row), so that the update of
+    ! the next face finds the columns of this one (coarse_problem%set_update)
+    c_mine = count(contact, kind=ip)
+    c_offset = 0
+    call MPI_Exscan(c_mine, c_offset, 1, MPI_INT_IP, MPI_SUM, this%comm, ierr)
+    if (rank == 0) c_offset = 0
+    allocate (col(con%n_own), wloc(con%n_local), v(6*this%layout%nlocal, k), my_keys(k_mine))
+    col = 0
+    j = offset
+    c = c_offset
+    do i = 1, con%n_own
+      if (contact(i)) c = c + 1
+      if (mask(i) .and. contact(i)) then
+        j = j + 1
+        col(i) = real(j, dp)
+        my_keys(j - offset) = int(c, i8)
+      end if
+    end do
+    keys = gather_keys(this%comm, my_keys, k)
+    call con%exchange%gather(col, wloc)
+    v = 0
+    do ls = 1, size(con%b, kind=ip)
+      associate (bs => con%b(ls))
+        do e = 1, bs%nentries
+          j = nint(wloc(bs%row(e)), ip)
+          if (j > 0) v(6*ls - 5:6*ls, j) = v(6*ls - 5:6*ls, j) + bs%g(:, e)
+        end do
+      end associate
+    end do
+    call timer_start('face: update')
+    call this%masked%set_update(v, keys)
+    call timer_stop('face: update')
+  end subroutine low_rank_update
+
+  !> The keys of all ranks of `comm` in rank order (k of them in all). Collective.
+  function gather_keys(comm, mine, k) result(all)
+    type(MPI_Comm), intent(in) :: comm
+    integer(i8), intent(in) :: mine(:)
+    integer(ip), intent(in) :: k
+    integer(i8) :: all(k)
+    integer :: n_mine, ierr
+    integer, allocatable :: counts(:), displs(:)
+    n_mine = size(mine)
+    call gathered_counts(n_mine, comm, counts, displs)
+    call MPI_Allgatherv(mine, n_mine, MPI_INTEGER8, all, counts, displs, MPI_INTEGER8, comm, ierr)
+  end function gather_keys
 
   !> The coarse positions (ascending, the same on every rank) of the
   !> subdomains that contact rows touch, and for each the sum of g g^T over

@@ -54,7 +54,6 @@ contains
     character(len=*), intent(in), optional :: history
     type(json_writer_t) :: js
     type(feti_t), pointer :: op
-    type(coarse_problem_t), pointer :: cp
     type(feti_sizes_t) :: n
     character(len=:), allocatable :: memory
     integer(i8) :: f_bytes
@@ -134,37 +133,12 @@ contains
     call js%end_object()
     call js%add_raw('memory', memory)
     if (present(history)) call js%add_raw('history', history)
-    cp => op%coarse_factor()
-    block
-      call js%begin_object('coarse')
-      call js%add_each([character(len=32) :: 'ranks_per_group', 'groups', 'factor_entries', &
-                        'factor_entries_effective', 'mumps_memory_mb_max_rank', 'mumps_memory_mb_group'], &
-                       [int(cp%ranks_per_group(), i8), int(cp%groups(), i8), cp%factor_entries(), &
-                        cp%factor_entries_effective(), cp%mumps_memory_mb()])
-      call js%add('factorization_seconds', cp%factorization_seconds())
-      call js%add('dense', cp%is_dense())
-      call js%end_object()
-    end block
+    call add_coarse(js, op)
     associate (b => blas_in_use())                 ! set up by the main program
       call js%add_raw('blas', blas_json(trim(b%library), trim(b%path), b%threads, trim(b%source), b%settable, &
                                          trim(b%core), trim(b%core_before)))
     end associate
-    call js%begin_object('performance')
-    call js%add('f_bytes_per_action_sum', f_bytes)
-    call js%add('f_action', trim(merge('explicit', 'implicit', op%f_explicit())))
-    ! the ordering of the subdomain factorizations (&solver local_ordering = 'auto' resolved)
-    call js%add('local_ordering', trim(op%local_ordering()))
-    call js%add('local_solver', trim(op%local_solver()))
-    ! f_action = 'auto''s deferred build: the F actions made before it (-1: none made or pending)
-    call js%add('f_explicit_after', merge(op%f_explicit_after(), -1_i8, op%f_explicit()))
-    call js%add('f_shared', op%f_shared())
-    call js%add('f_flops_per_action_sum', f_flops)
-    call js%add_each([character(len=32) :: 'factorization_flops_sum', 'explicit_f_flops_sum'], flops)
-    call js%add_each([character(len=32) :: 'f_action_seconds_per_call', 'f_bandwidth_bytes_per_second', &
-                      'solve_seconds', 'solve_f_action_seconds', 'solve_coarse_seconds', 'solve_coarse_share'], &
-                     [f_seconds, real(f_bytes, dp)/max(f_seconds, tiny(1.0_dp)), seconds(1), seconds(2), seconds(3), &
-                      seconds(3)/max(seconds(1), tiny(1.0_dp))])
-    call js%end_object()
+    call add_performance(js, op, f_bytes, flops, f_flops, f_seconds, seconds)
     call js%end_object()
     call js%write_file(trim(output%directory)//'/report.json', op%comm())
 
@@ -183,6 +157,47 @@ contains
       end if
     end subroutine add_stat_max
   end subroutine write_run_report
+
+  !> report.json's `coarse`: the coarse factorization of the run.
+  subroutine add_coarse(js, op)
+    type(json_writer_t), intent(inout) :: js
+    type(feti_t), intent(inout), target :: op
+    type(coarse_problem_t), pointer :: cp
+    cp => op%coarse_factor()
+    call js%begin_object('coarse')
+    call js%add_each([character(len=32) :: 'ranks_per_group', 'groups', 'factor_entries', &
+                      'factor_entries_effective', 'mumps_memory_mb_max_rank', 'mumps_memory_mb_group'], &
+                     [int(cp%ranks_per_group(), i8), int(cp%groups(), i8), cp%factor_entries(), &
+                      cp%factor_entries_effective(), cp%mumps_memory_mb()])
+    call js%add('factorization_seconds', cp%factorization_seconds())
+    call js%add('dense', cp%is_dense())
+    call js%end_object()
+  end subroutine add_coarse
+
+  !> report.json's `performance`: the F action's bytes, flops and time
+  !> (sums over the ranks), the variants the run resolved, the solve's times.
+  subroutine add_performance(js, op, f_bytes, flops, f_flops, f_seconds, seconds)
+    type(json_writer_t), intent(inout) :: js
+    type(feti_t), intent(inout) :: op
+    integer(i8), intent(in) :: f_bytes
+    real(dp), intent(in) :: flops(2), f_flops, f_seconds, seconds(3)
+    call js%begin_object('performance')
+    call js%add('f_bytes_per_action_sum', f_bytes)
+    call js%add('f_action', trim(merge('explicit', 'implicit', op%f_explicit())))
+    ! the ordering of the subdomain factorizations (&solver local_ordering = 'auto' resolved)
+    call js%add('local_ordering', trim(op%local_ordering()))
+    call js%add('local_solver', trim(op%local_solver()))
+    ! f_action = 'auto''s deferred build: the F actions made before it (-1: none made or pending)
+    call js%add('f_explicit_after', merge(op%f_explicit_after(), -1_i8, op%f_explicit()))
+    call js%add('f_shared', op%f_shared())
+    call js%add('f_flops_per_action_sum', f_flops)
+    call js%add_each([character(len=32) :: 'factorization_flops_sum', 'explicit_f_flops_sum'], flops)
+    call js%add_each([character(len=32) :: 'f_action_seconds_per_call', 'f_bandwidth_bytes_per_second', &
+                      'solve_seconds', 'solve_f_action_seconds', 'solve_coarse_seconds', 'solve_coarse_share'], &
+                     [f_seconds, real(f_bytes, dp)/max(f_seconds, tiny(1.0_dp)), seconds(1), seconds(2), seconds(3), &
+                      seconds(3)/max(seconds(1), tiny(1.0_dp))])
+    call js%end_object()
+  end subroutine add_performance
 
   !> Where the output is and how to look at it (a user's first question), with
   !> absolute paths: the hints work from any folder (the plotting tool of the
