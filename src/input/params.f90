@@ -1,12 +1,15 @@
-!> Run parameters: the namelist groups, their defaults, reading, checking,
-!> broadcasting and echoing.
+!> Run parameters: the namelist groups, their defaults, reading, checking
+!> and echoing.
 !>
-!> Rank 0 reads the whole file, splits it into groups, reads each group with
-!> an internal namelist read, and checks the values. When a group fails to
-!> read, its assignments are read again one by one so that the message can
-!> name the variable at fault. The outcome (parameters or an error message) is
-!> broadcast, and on error every rank exits together with status 2.
-!> Every variable is documented in docs/INPUT.md.
+!> Every component's settings type (settings_base::settings_t) declares its
+!> group, its variables and its namelist; `components` is the one list of
+!> them, and reading, writing and checking loop over it. Rank 0 reads the
+!> file and broadcasts its text; every rank splits it into groups, hands each
+!> group to its owners (an internal namelist read each) and checks the
+!> values. When a group fails to read, its assignments are read again one by
+!> one so that the message can name the variable at fault. On an error every
+!> rank exits together with status 2 (rank 0 says why). Every variable is
+!> documented in docs/INPUT.md.
 module params
   use kinds, only: dp, ip, i8, path_len, name_len
   use errors, only: collective_error, exit_input_error, fatal_error, set_input_file
