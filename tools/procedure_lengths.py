@@ -3,9 +3,11 @@
 first line to its `end` line, comments and the procedures it contains
 included (a procedure with internal helpers counts them; the helpers are also
 measured on their own). Prints the procedures longer
-than --max lines (default 150) and exits 1 if there is any, 0 otherwise.
+than --max lines (default 120), or --max-app lines (default 80) in a folder
+named `app` (src/app: the program's steps read at a glance), and exits 1 if
+there is any, 0 otherwise.
 
-    tools/procedure_lengths.py [--max N] [--list] [paths...]   (default: src)
+    tools/procedure_lengths.py [--max N] [--max-app N] [--list] [paths...]   (default: src)
 """
 import argparse
 import os
@@ -67,7 +69,8 @@ def procedures(path):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('paths', nargs='*', default=['src'])
-    ap.add_argument('--max', type=int, default=150)
+    ap.add_argument('--max', type=int, default=120)
+    ap.add_argument('--max-app', type=int, default=80)
     ap.add_argument('--list', action='store_true', help='print every procedure, longest first')
     args = ap.parse_args()
     files = []
@@ -81,14 +84,17 @@ def main():
     for f in sorted(files):
         rows += [(n, f, first, length) for n, first, length in procedures(f)]
     rows.sort(key=lambda r: -r[3])
-    long_ones = [r for r in rows if r[3] > args.max]
+    def limit(path):
+        return args.max_app if 'app' in os.path.normpath(path).split(os.sep)[:-1] else args.max
+    long_ones = [r for r in rows if r[3] > limit(r[1])]
     try:
         for name, f, first, length in (rows if args.list else long_ones):
             print('%5d  %s:%d  %s' % (length, f, first, name))
     except BrokenPipeError:
         return 0
     if not args.list:
-        print('%d procedures, %d longer than %d lines' % (len(rows), len(long_ones), args.max))
+        print('%d procedures, %d longer than %d lines (%d in app)' % (len(rows), len(long_ones), args.max,
+                                                                       args.max_app))
     return 1 if long_ones else 0
 
 

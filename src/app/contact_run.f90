@@ -16,6 +16,7 @@ module contact_run
   use feti_operators, only: feti_t
   use contact_summary, only: contact_summary_t, summarize_contact
   use run_checks, only: check_run
+  use decomposition, only: decomposition_t
   use field_output, only: write_run_fields
   use run_report, only: write_run_report, log_where_to_look
   use report, only: print_timing_table
@@ -46,18 +47,20 @@ contains
     real(dp), allocatable :: nu(:)
     real(dp) :: seconds(3)
     character(len=200) :: line
+    type(decomposition_t) :: units
     integer :: ierr
 
-    call check_run(p, comm)        ! what --check checks: output folder, ranks, coarse groups; memory estimate
+    ! what --check checks: output folder, ranks, coarse groups; memory estimate; the decomposition
+    call check_run(p, comm, units)
     if (p%history%is_history()) then
       ! &history: one set-up, a solve per step (load_history)
-      call run_load_history(p, comm, status)
+      call run_load_history(p, comm, status, units)
       return
     end if
     call MPI_Barrier(comm, ierr)
     call timer_start('total')
     ! 1. set-up: mesh, assembly, K^+, B and G, coarse problem, d, e, lambda~, ||P F P||, the dual QP
-    call dual%setup(feti_settings_of(p), p%solver%dual, p%solver%preconditioner, p%reconstruction, comm)
+    call dual%setup(feti_settings_of(p), p%solver%dual, p%solver%preconditioner, p%reconstruction, comm, units)
     call memory_mark('dual QP setup')
     ! 2. solve: SMALBE (outer) + MPRGP (inner) on the dual QP
     call log_section('SMALBE / MPRGP')

@@ -22,6 +22,7 @@ module load_history
   use tfeti_dualization, only: tfeti_dualization_t, dual_solution_t
   use feti_operators, only: feti_t, feti_sizes_t
   use subdomain, only: subdomain_t
+  use decomposition, only: decomposition_t
   use contact_summary, only: contact_summary_t, summarize_contact
   use hdf5_output, only: check_output_directory
   use field_output, only: write_run_fields
@@ -66,17 +67,19 @@ contains
 
   !> Run the history of `p` on `comm`; `status` 0 when every step converged
   !> and passed the KKT check (also when a time limit or a signal stopped
-  !> the run after a step), else that of the failed step.
-  subroutine run_load_history(p, comm, status)
+  !> the run after a step), else that of the failed step. `units`: the
+  !> decomposition of the checks (run_checks::check_run).
+  subroutine run_load_history(p, comm, status, units)
     type(params_t), intent(in) :: p
     type(MPI_Comm), intent(in) :: comm
     integer, intent(out) :: status
+    type(decomposition_t), intent(in), optional :: units
     type(history_run_t), target :: h
     type(step_record_t) :: rec
     integer(ip) :: step, first
 
     h%comm = comm
-    call start_history(p, h, first)
+    call start_history(p, h, first, units)
     status = 0
     do step = first, p%history%nsteps
       call solve_step(p, h, step, rec)
@@ -91,11 +94,12 @@ contains
 
   !> The set-up of a history: the output folder, the stop signal, one
   !> dual set-up for every step, and (restart) the checkpoint; `first`: the
-  !> first step to solve.
-  subroutine start_history(p, h, first)
+  !> first step to solve; `units`: the checks' decomposition, if any.
+  subroutine start_history(p, h, first, units)
     type(params_t), intent(in) :: p
     type(history_run_t), intent(inout), target :: h
     integer(ip), intent(out) :: first
+    type(decomposition_t), intent(in), optional :: units
     integer :: ierr
     character(len=300) :: line
     call MPI_Comm_rank(h%comm, h%rank, ierr)
@@ -106,7 +110,8 @@ contains
     call MPI_Barrier(h%comm, ierr)
     h%t_start = MPI_Wtime()
     call timer_start('total')
-    call h%dual%setup(feti_settings_of(p), p%solver%dual, p%solver%preconditioner, p%reconstruction, h%comm)
+    call h%dual%setup(feti_settings_of(p), p%solver%dual, p%solver%preconditioner, p%reconstruction, h%comm, &
+                      units)
     call h%dual%prepare_history()
     call memory_mark('dual QP setup')
     h%op => h%dual%operators()

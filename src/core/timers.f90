@@ -251,8 +251,7 @@ contains
     do i = 1, ntree
       k = abs(order(i))
       if (order(i) > 0) then
-        stats(i) = timer_stat_t(row=row_tree, label=labels(k), depth=depth_of(up, k), &
-                               parent=parent_row(up, row_of, k))
+        stats(i) = timer_stat_t(row=row_tree, label=labels(k), depth=depth_of(up, k), parent=parent_row(up, row_of, k))
       else
         stats(i) = timer_stat_t(row=row_other, label='other', depth=depth_of(up, k) + 1, parent=row_of(k))
       end if
@@ -293,7 +292,7 @@ contains
 
   end subroutine timers_reduce
 
-  !> The depth of path k in the tree of parents `up` (0: a root).
+  !> The depth of path `k` in the tree of parents `up` (0 at a root).
   pure integer function depth_of(up, k)
     integer, intent(in) :: up(:), k
     integer :: j
@@ -305,14 +304,14 @@ contains
     end do
   end function depth_of
 
-  !> The table row of the parent of path k (0: none).
+  !> The row of the parent of path `k` (0 at a root).
   pure integer function parent_row(up, row_of, k)
     integer, intent(in) :: up(:), row_of(:), k
     parent_row = 0
     if (up(k) > 0) parent_row = row_of(up(k))
   end function parent_row
 
-  !> Path k lies under a path of the same label (its time counts there).
+  !> Path `k` lies under a path of the same label (its time is counted there).
   pure logical function under_same_label(up, labels, k)
     integer, intent(in) :: up(:), k
     character(len=*), intent(in) :: labels(:)

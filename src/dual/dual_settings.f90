@@ -5,15 +5,18 @@
 module dual_settings
   use kinds, only: dp, name_len
   use text, only: lower_case, reals_text
+  use settings_base, only: settings_t, refuse
   implicit none
   private
 
-  type, public :: dual_settings_t
+  type, extends(settings_t), public :: dual_settings_t
     real(dp) :: rho_scale = 1  !< penalty rho = rho_scale ||P F P||
     !> SMALBE's stopping test: 'violation' (largest constraint violation in
     character(len=name_len) :: stopping = 'violation'  !< displacement units, relative) | 'norm' (the classical 2-norm test)
   contains
     procedure :: check => dual_settings_check
+    procedure :: group => dual_settings_group
+    procedure :: variables => dual_settings_variables
     procedure :: read_namelist => dual_settings_read
     procedure :: write_namelist => dual_settings_write
   end type dual_settings_t
@@ -29,18 +32,25 @@ contains
     rule = ''
     got = ''
     if (self%rho_scale <= 0) then
-      call bad('rho_scale', 'must be > 0', reals_text([self%rho_scale]))
+      call refuse('rho_scale', 'must be > 0', reals_text([self%rho_scale]), variable, rule, got)
     else if (.not. any(self%stopping == [character(len=9) :: 'violation', 'norm'])) then
-      call bad('stopping', "must be 'violation' or 'norm'", self%stopping)
+      call refuse('stopping', "must be 'violation' or 'norm'", self%stopping, variable, rule, got)
     end if
-  contains
-    subroutine bad(name, text, value)
-      character(len=*), intent(in) :: name, text, value
-      variable = name
-      rule = text
-      got = trim(value)
-    end subroutine bad
   end subroutine dual_settings_check
+
+  !> The namelist group of these variables.
+  function dual_settings_group(self) result(name)
+    class(dual_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'solver'
+  end function dual_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine dual_settings_variables(self, names)
+    class(dual_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'rho_scale', 'stopping']
+  end subroutine dual_settings_variables
 
   !> Read this component's variables from the group text `group`
   !> ('&solver ... /'); strings lower case.

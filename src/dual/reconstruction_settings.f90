@@ -5,15 +5,18 @@
 module reconstruction_settings
   use kinds, only: dp, name_len
   use text, only: lower_case, reals_text
+  use settings_base, only: settings_t, refuse
   implicit none
   private
 
-  type, public :: reconstruction_settings_t
+  type, extends(settings_t), public :: reconstruction_settings_t
     character(len=name_len) :: method = 'both'  !< 'multiplier' (Eq. 24/25) | 'standard' (Eq. 10) | 'both'
     real(dp) :: active_tol = 1.0e-8_dp  !< contact row active if lambda > active_tol max(lambda)
     real(dp) :: kkt_tol = 1.0e-3_dp  !< largest KKT residual accepted
   contains
     procedure :: check => reconstruction_settings_check
+    procedure :: group => reconstruction_settings_group
+    procedure :: variables => reconstruction_settings_variables
     procedure :: read_namelist => reconstruction_settings_read
     procedure :: write_namelist => reconstruction_settings_write
   end type reconstruction_settings_t
@@ -29,22 +32,30 @@ contains
     rule = ''
     got = ''
     if (self%method == 'new') then
-      call bad('method', "'new' is now spelled 'multiplier' (alpha_bar from SMALBE's multiplier, Eq. 24/25)", self%method)
+      call refuse('method', "'new' is now spelled 'multiplier' (alpha_bar from SMALBE's multiplier, Eq. 24/25)", self%method, &
+                   variable, rule, got)
     else if (.not. any(self%method == [character(len=10) :: 'multiplier', 'standard', 'both'])) then
-      call bad('method', "must be 'multiplier', 'standard' or 'both'", self%method)
+      call refuse('method', "must be 'multiplier', 'standard' or 'both'", self%method, variable, rule, got)
     else if (self%active_tol < 0 .or. self%active_tol >= 1) then
-      call bad('active_tol', 'must be in [0, 1)', reals_text([self%active_tol]))
+      call refuse('active_tol', 'must be in [0, 1)', reals_text([self%active_tol]), variable, rule, got)
     else if (self%kkt_tol <= 0) then
-      call bad('kkt_tol', 'must be > 0', reals_text([self%kkt_tol]))
+      call refuse('kkt_tol', 'must be > 0', reals_text([self%kkt_tol]), variable, rule, got)
     end if
-  contains
-    subroutine bad(name, text, value)
-      character(len=*), intent(in) :: name, text, value
-      variable = name
-      rule = text
-      got = trim(value)
-    end subroutine bad
   end subroutine reconstruction_settings_check
+
+  !> The namelist group of these variables.
+  function reconstruction_settings_group(self) result(name)
+    class(reconstruction_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'reconstruction'
+  end function reconstruction_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine reconstruction_settings_variables(self, names)
+    class(reconstruction_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'method', 'active_tol', 'kkt_tol']
+  end subroutine reconstruction_settings_variables
 
   !> Read this component's variables from the group text `group`
   !> ('&reconstruction ... /'); strings lower case.

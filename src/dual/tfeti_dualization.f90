@@ -16,6 +16,7 @@ module tfeti_dualization
   use reconstruction_settings, only: reconstruction_settings_t
   use feti_operators, only: feti_t, local_field_t, feti_sizes_t
   use subdomain, only: subdomain_t
+  use decomposition, only: decomposition_t
   use orthonormal_coarse, only: check_orthonormal_size
   use qp_problem, only: qp_problem_t, qp_solver_t
   use dual_problem, only: dual_problem_t
@@ -71,14 +72,16 @@ contains
   !> Build the FETI operators (`feti`) and the dual QP (`dual`, its
   !> `preconditioner`) on `comm`; keep what the reconstruction needs
   !> (`reconstruction`). `this` must be a target (the dual problem points to
-  !> its operators).
-  subroutine setup(this, feti, dual, preconditioner, reconstruction, comm)
+  !> its operators). `units`: the decomposition of the checks before the run
+  !> (run_checks), built by the FETI set-up without it.
+  subroutine setup(this, feti, dual, preconditioner, reconstruction, comm, units)
     class(tfeti_dualization_t), intent(inout), target :: this
     type(feti_settings_t), intent(in) :: feti
     type(dual_settings_t), intent(in) :: dual
     type(preconditioner_settings_t), intent(in) :: preconditioner
     type(reconstruction_settings_t), intent(in) :: reconstruction
     type(MPI_Comm), intent(in) :: comm
+    type(decomposition_t), intent(in), optional :: units
     type(feti_sizes_t) :: n
     character(len=200) :: line
     character(len=name_len) :: kind
@@ -88,7 +91,7 @@ contains
     this%method = reconstruction%method
     this%active_tol = reconstruction%active_tol
     if (feti%coarse%coarse == 'orthonormal') call check_orthonormal_size(product(feti%mesh%nsub), comm)
-    call this%op%setup(feti, comm)
+    call this%op%setup(feti, comm, units)
     call MPI_Comm_size(comm, nranks, ierr)
     n = this%op%sizes()
     call log_section('Problem')

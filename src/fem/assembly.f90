@@ -2,7 +2,7 @@
 !> symmetric storage, columns ascending), load f, kernel basis R; and what the
 !> output needs from the element level (von Mises stress, tributary areas).
 module assembly
-  use kinds, only: dp, ip
+  use kinds, only: dp, ip, name_len
   use errors, only: fatal_error
   use materials, only: material_settings_t
   use box_mesh, only: face_z0, face_z1
@@ -13,6 +13,7 @@ module assembly
   use materials, only: subdomain_material
   use rigid_modes, only: rigid_body_modes
   use sorting, only: sort_ints, append_unmarked
+  use settings_base, only: settings_t
   implicit none
   private
 
@@ -21,14 +22,30 @@ module assembly
 
   !> The settings of `&load` (docs/INPUT.md): the default and the namelist
   !> variables (params hands the group over).
-  type, public :: load_settings_t
+  type, extends(settings_t), public :: load_settings_t
     real(dp) :: top_pressure = 0              !< pressure on z = Lz, positive pushes down [MPa]
   contains
+    procedure :: group => load_settings_group
+    procedure :: variables => load_settings_variables
     procedure :: read_namelist => load_settings_read
     procedure :: write_namelist => load_settings_write
   end type load_settings_t
 
 contains
+
+  !> The namelist group of these variables.
+  function load_settings_group(self) result(name)
+    class(load_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'load'
+  end function load_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine load_settings_variables(self, names)
+    class(load_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'top_pressure']
+  end subroutine load_settings_variables
 
   !> Read the group text `group` ('&load ... /').
   subroutine load_settings_read(self, group, status, msg)

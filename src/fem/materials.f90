@@ -11,6 +11,7 @@ module materials
   use box_mesh, only: hash_unit
   use decomposition, only: decomposition_t
   use text, only: lower_case
+  use settings_base, only: settings_t
   implicit none
   private
 
@@ -18,7 +19,7 @@ module materials
 
   !> The settings of `&material` (docs/INPUT.md): defaults, the checks within
   !> the group and the namelist variables (params hands the group over).
-  type, public :: material_settings_t
+  type, extends(settings_t), public :: material_settings_t
     real(dp) :: young = 2.1e5_dp              !< Young's modulus [MPa]
     real(dp) :: poisson = 0.3_dp              !< Poisson's ratio
     character(len=name_len) :: variation = 'none'  !< 'none' | 'checkerboard' | 'random'
@@ -26,6 +27,8 @@ module materials
     integer(ip) :: seed = 1                   !< seed of 'random'
   contains
     procedure :: check => material_settings_check
+    procedure :: group => material_settings_group
+    procedure :: variables => material_settings_variables
     procedure :: read_namelist => material_settings_read
     procedure :: write_namelist => material_settings_write
   end type material_settings_t
@@ -61,6 +64,20 @@ contains
     end if
     got = trim(buf)
   end subroutine material_settings_check
+
+  !> The namelist group of these variables.
+  function material_settings_group(self) result(name)
+    class(material_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'material'
+  end function material_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine material_settings_variables(self, names)
+    class(material_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'young', 'poisson', 'variation', 'contrast', 'seed']
+  end subroutine material_settings_variables
 
   !> Read the group text `group` ('&material ... /'); strings lower case.
   subroutine material_settings_read(self, group, status, msg)

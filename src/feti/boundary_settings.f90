@@ -4,17 +4,20 @@
 !> every rigid motion involves &obstacle: params' check_params). Used by
 !> constraints (the Dirichlet rows of B).
 module boundary_settings
-  use kinds, only: dp
+  use kinds, only: dp, name_len
+  use settings_base, only: settings_t
   implicit none
   private
 
-  type, public :: boundary_settings_t
+  type, extends(settings_t), public :: boundary_settings_t
     logical :: top_dirichlet = .true.  !< prescribe u on z = Lz
     real(dp) :: top_displacement(3) = [0.0_dp, 0.0_dp, -0.005_dp]  !< its value [mm]
     logical :: symmetry_x0 = .false.  !< u_x = 0 on x = 0
     logical :: symmetry_y0 = .false.  !< u_y = 0 on y = 0
   contains
     procedure :: check => boundary_settings_check
+    procedure :: group => boundary_settings_group
+    procedure :: variables => boundary_settings_variables
     procedure :: read_namelist => boundary_settings_read
     procedure :: write_namelist => boundary_settings_write
   end type boundary_settings_t
@@ -31,6 +34,20 @@ contains
     got = ''
     ! every value is allowed (the checks across groups are params' check_params)
   end subroutine boundary_settings_check
+
+  !> The namelist group of these variables.
+  function boundary_settings_group(self) result(name)
+    class(boundary_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'boundary'
+  end function boundary_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine boundary_settings_variables(self, names)
+    class(boundary_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'top_dirichlet', 'top_displacement', 'symmetry_x0', 'symmetry_y0']
+  end subroutine boundary_settings_variables
 
   !> Read this component's variables from the group text `group`
   !> ('&boundary ... /').

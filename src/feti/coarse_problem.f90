@@ -529,11 +529,7 @@ contains
     real(dp) :: blk(6, 8)
     type(block_hash_t) :: blocks
     logical :: keep
-    integer :: rank, ierr
-    type(MPI_Comm) :: comm
 
-    comm = this%comm
-    rank = this%rank
     ! 1. the 6-blocks of every row, by copy slot, summed at the owner (once per run)
     call ensure_row_blocks(dec, con)
 
@@ -555,7 +551,7 @@ contains
       end if
       do j1 = 1, nb
         do j2 = j1, nb
-          call add_product(blocks, pos(j1), pos(j2), blk(:, j1), blk(:, j2))
+          call add_product(pos(j1), pos(j2), blk(:, j1), blk(:, j2))
         end do
       end do
     end do
@@ -563,90 +559,94 @@ contains
     ! 3. COO of the upper triangle, to one member of every group
     call blocks%to_coo(irn, jcn, a)
     blocks = block_hash_t()              ! released before the factorization
-    if (this%ngroups > 1) call send_to_groups(irn, jcn, a)
+    if (this%ngroups > 1) call send_to_groups(this, irn, jcn, a)
 
   contains
 
-    !> Each rank's entries to one member of every group: in group g (ranks
-    !> first(g) .. first(g+1)-1, size s_g) to first(g) + mod(rank, s_g). A
-    !> member m of group g receives from the ranks r with mod(r, s_g) = m
-    !> (about P / s_g ranks), in ascending rank order. Point to
-    !> point with these ranks only (no collective over all ranks: a rank
-    !> talks to ngroups + P / c peers, not to all P).
-    subroutine send_to_groups(irn, jcn, a)
-      integer(ip), allocatable, intent(inout) :: irn(:), jcn(:)
-      real(dp), allocatable, intent(inout) :: a(:)
-      integer, allocatable :: first(:), sources(:), rcounts(:), rdispls(:), dests(:)
-      type(MPI_Request), allocatable :: req(:)
-      integer(ip), allocatable :: new_i(:), new_j(:)
-      real(dp), allocatable :: new_a(:)
-      integer :: nranks, g, k, nsrc, mine, member, gsize, nreq
-      call MPI_Comm_size(comm, nranks, ierr)
-      call group_starts(nranks, this%ngroups, first)
-      allocate (dests(this%ngroups))
-      do g = 0, this%ngroups - 1
-        dests(g + 1) = first(g) + mod(rank, first(g + 1) - first(g))
+    !> block(ps, pt) += u v^T, kept as an upper-triangular block pair
+    subroutine add_product(ps, pt, u, v)
+      integer(ip), intent(in) :: ps, pt
+      real(dp), intent(in) :: u(6), v(6)
+      real(dp) :: outer(6, 6)
+      integer :: a1, a2
+      do a2 = 1, 6
+        do a1 = 1, 6
+          outer(a1, a2) = u(a1)*v(a2)
+        end do
       end do
-      member = rank - first(this%group)
-      gsize = first(this%group + 1) - first(this%group)
-      sources = [(k, k = member, nranks - 1, gsize)]
-      nsrc = size(sources)
-      ! 1. the counts
-      mine = size(a)
-      allocate (rcounts(nsrc), rdispls(nsrc), req(nsrc + this%ngroups))
-      do k = 1, nsrc
-        call MPI_Irecv(rcounts(k), 1, MPI_INTEGER, sources(k), 1, comm, req(k), ierr)
-      end do
-      do g = 1, this%ngroups
-        call MPI_Isend(mine, 1, MPI_INTEGER, dests(g), 1, comm, req(nsrc + g), ierr)
-      end do
-      call MPI_Waitall(nsrc + this%ngroups, req, MPI_STATUSES_IGNORE, ierr)
-      rdispls(1) = 0
-      do k = 2, nsrc
-        rdispls(k) = rdispls(k - 1) + rcounts(k - 1)
-      end do
-      ! 2. the entries, in ascending source rank order
-      allocate (new_i(sum(rcounts)), new_j(sum(rcounts)), new_a(sum(rcounts)))
-      deallocate (req)
-      allocate (req(3*(nsrc + this%ngroups)))
-      nreq = 0
-      do k = 1, nsrc
-        call MPI_Irecv(new_i(rdispls(k) + 1:), rcounts(k), MPI_INT_IP, sources(k), 2, comm, req(nreq + 1), ierr)
-        call MPI_Irecv(new_j(rdispls(k) + 1:), rcounts(k), MPI_INT_IP, sources(k), 3, comm, req(nreq + 2), ierr)
-        call MPI_Irecv(new_a(rdispls(k) + 1:), rcounts(k), MPI_REAL_DP, sources(k), 4, comm, req(nreq + 3), ierr)
-        nreq = nreq + 3
-      end do
-      do g = 1, this%ngroups
-        call MPI_Isend(irn, mine, MPI_INT_IP, dests(g), 2, comm, req(nreq + 1), ierr)
-        call MPI_Isend(jcn, mine, MPI_INT_IP, dests(g), 3, comm, req(nreq + 2), ierr)
-        call MPI_Isend(a, mine, MPI_REAL_DP, dests(g), 4, comm, req(nreq + 3), ierr)
-        nreq = nreq + 3
-      end do
-      call MPI_Waitall(nreq, req, MPI_STATUSES_IGNORE, ierr)
-      call move_alloc(new_i, irn)
-      call move_alloc(new_j, jcn)
-      call move_alloc(new_a, a)
-    end subroutine send_to_groups
+      if (ps <= pt) then
+        call blocks%add(ps, pt, outer)
+      else
+        call blocks%add(pt, ps, transpose(outer))
+      end if
+    end subroutine add_product
   end subroutine assemble
 
-  !> block(ps, pt) += u v^T, kept as an upper-triangular block pair
-  subroutine add_product(blocks, ps, pt, u, v)
-    type(block_hash_t), intent(inout) :: blocks
-    integer(ip), intent(in) :: ps, pt
-    real(dp), intent(in) :: u(6), v(6)
-    real(dp) :: outer(6, 6)
-    integer :: a1, a2
-    do a2 = 1, 6
-      do a1 = 1, 6
-        outer(a1, a2) = u(a1)*v(a2)
-      end do
+  !> Each rank's entries to one member of every group: in group g (ranks
+  !> first(g) .. first(g+1)-1, size s_g) to first(g) + mod(rank, s_g). A
+  !> member m of group g receives from the ranks r with mod(r, s_g) = m
+  !> (about P / s_g ranks), in ascending rank order. Point to
+  !> point with these ranks only (no collective over all ranks: a rank
+  !> talks to ngroups + P / c peers, not to all P).
+  subroutine send_to_groups(this, irn, jcn, a)
+    class(coarse_problem_t), intent(in) :: this
+    integer(ip), allocatable, intent(inout) :: irn(:), jcn(:)
+    real(dp), allocatable, intent(inout) :: a(:)
+    type(MPI_Comm) :: comm
+    integer :: rank, ierr
+    integer, allocatable :: first(:), sources(:), rcounts(:), rdispls(:), dests(:)
+    type(MPI_Request), allocatable :: req(:)
+    integer(ip), allocatable :: new_i(:), new_j(:)
+    real(dp), allocatable :: new_a(:)
+    integer :: nranks, g, k, nsrc, mine, member, gsize, nreq
+    comm = this%comm
+    rank = this%rank
+    call MPI_Comm_size(comm, nranks, ierr)
+    call group_starts(nranks, this%ngroups, first)
+    allocate (dests(this%ngroups))
+    do g = 0, this%ngroups - 1
+      dests(g + 1) = first(g) + mod(rank, first(g + 1) - first(g))
     end do
-    if (ps <= pt) then
-      call blocks%add(ps, pt, outer)
-    else
-      call blocks%add(pt, ps, transpose(outer))
-    end if
-  end subroutine add_product
+    member = rank - first(this%group)
+    gsize = first(this%group + 1) - first(this%group)
+    sources = [(k, k = member, nranks - 1, gsize)]
+    nsrc = size(sources)
+    ! 1. the counts
+    mine = size(a)
+    allocate (rcounts(nsrc), rdispls(nsrc), req(nsrc + this%ngroups))
+    do k = 1, nsrc
+      call MPI_Irecv(rcounts(k), 1, MPI_INTEGER, sources(k), 1, comm, req(k), ierr)
+    end do
+    do g = 1, this%ngroups
+      call MPI_Isend(mine, 1, MPI_INTEGER, dests(g), 1, comm, req(nsrc + g), ierr)
+    end do
+    call MPI_Waitall(nsrc + this%ngroups, req, MPI_STATUSES_IGNORE, ierr)
+    rdispls(1) = 0
+    do k = 2, nsrc
+      rdispls(k) = rdispls(k - 1) + rcounts(k - 1)
+    end do
+    ! 2. the entries, in ascending source rank order
+    allocate (new_i(sum(rcounts)), new_j(sum(rcounts)), new_a(sum(rcounts)))
+    deallocate (req)
+    allocate (req(3*(nsrc + this%ngroups)))
+    nreq = 0
+    do k = 1, nsrc
+      call MPI_Irecv(new_i(rdispls(k) + 1:), rcounts(k), MPI_INT_IP, sources(k), 2, comm, req(nreq + 1), ierr)
+      call MPI_Irecv(new_j(rdispls(k) + 1:), rcounts(k), MPI_INT_IP, sources(k), 3, comm, req(nreq + 2), ierr)
+      call MPI_Irecv(new_a(rdispls(k) + 1:), rcounts(k), MPI_REAL_DP, sources(k), 4, comm, req(nreq + 3), ierr)
+      nreq = nreq + 3
+    end do
+    do g = 1, this%ngroups
+      call MPI_Isend(irn, mine, MPI_INT_IP, dests(g), 2, comm, req(nreq + 1), ierr)
+      call MPI_Isend(jcn, mine, MPI_INT_IP, dests(g), 3, comm, req(nreq + 2), ierr)
+      call MPI_Isend(a, mine, MPI_REAL_DP, dests(g), 4, comm, req(nreq + 3), ierr)
+      nreq = nreq + 3
+    end do
+    call MPI_Waitall(nreq, req, MPI_STATUSES_IGNORE, ierr)
+    call move_alloc(new_i, irn)
+    call move_alloc(new_j, jcn)
+    call move_alloc(new_a, a)
+  end subroutine send_to_groups
 
   !> The nonzero 6-blocks of G^T of every owned row with their subdomains, in
   !> `con` (constraints_t g_row_*), unless they are there already. A row has

@@ -6,12 +6,13 @@
 module coarse_settings
   use kinds, only: dp, ip, name_len
   use text, only: lower_case, ints_text, reals_text
+  use settings_base, only: settings_t, refuse
   implicit none
   private
 
-  type, public :: coarse_settings_t
+  type, extends(settings_t), public :: coarse_settings_t
     !> how SMALBE holds G: 'mumps' ((G G^T)^{-1} by its factors) |
-    character(len=name_len) :: coarse = 'mumps'  !< 'cholesky' (the explicit orthonormal G~)
+    character(len=name_len) :: coarse = 'mumps'  !< 'orthonormal' (the explicit orthonormal G~)
     !> 'auto' (coarse_ranks decides) | 'redundant' (= coarse_ranks 1) |
     character(len=name_len) :: coarse_placement = 'auto'  !< 'distributed' (= all ranks)
     integer(ip) :: coarse_ranks = 0  !< ranks per coarse group (0: chosen from the coarse dimension)
@@ -21,6 +22,8 @@ module coarse_settings
     character(len=name_len) :: coarse_factor = 'auto'  !< coarse groups) | 'auto' ('dense' up to coarse_dense_max, else 'mumps')
   contains
     procedure :: check => coarse_settings_check
+    procedure :: group => coarse_settings_group
+    procedure :: variables => coarse_settings_variables
     procedure :: read_namelist => coarse_settings_read
     procedure :: write_namelist => coarse_settings_write
   end type coarse_settings_t
@@ -36,33 +39,47 @@ contains
     rule = ''
     got = ''
     if (self%coarse == 'cholesky') then
-      call bad('coarse', "'cholesky' is now spelled 'orthonormal' (the explicit orthonormal G~)", self%coarse)
+      call refuse('coarse', "'cholesky' is now spelled 'orthonormal' (the explicit orthonormal G~)", self%coarse, &
+                   variable, rule, got)
     else if (.not. any(self%coarse == [character(len=11) :: 'mumps', 'orthonormal'])) then
-      call bad('coarse', "must be 'mumps' or 'orthonormal'", self%coarse)
+      call refuse('coarse', "must be 'mumps' or 'orthonormal'", self%coarse, variable, rule, got)
     else if (.not. any(self%coarse_placement == [character(len=12) :: 'auto', 'redundant', 'distributed'])) then
-      call bad('coarse_placement', "must be 'auto', 'redundant' or 'distributed'", self%coarse_placement)
+      call refuse('coarse_placement', "must be 'auto', 'redundant' or 'distributed'", self%coarse_placement, &
+                   variable, rule, got)
     else if (self%coarse_ranks < 0) then
-      call bad('coarse_ranks', 'must be >= 0 (0: chosen from the coarse dimension and the ranks)', &
-               ints_text([self%coarse_ranks]))
+      call refuse('coarse_ranks', 'must be >= 0 (0: chosen from the coarse dimension and the ranks)', &
+               ints_text([self%coarse_ranks]), variable, rule, got)
     else if (self%coarse_ranks > 0 .and. self%coarse_placement /= 'auto') then
-      call bad('coarse_ranks', "give coarse_ranks or coarse_placement ('redundant' = 1, "// &
-               "'distributed' = all ranks), not both", ints_text([self%coarse_ranks])//', '//trim(self%coarse_placement))
+      call refuse('coarse_ranks', "give coarse_ranks or coarse_placement ('redundant' = 1, "// &
+               "'distributed' = all ranks), not both", ints_text([self%coarse_ranks])//', '//trim(self%coarse_placement), &
+                            variable, rule, got)
     else if (.not. (self%coarse_blr >= 0 .and. self%coarse_blr < 1)) then
-      call bad('coarse_blr', 'must be in [0, 1) (0: full-rank factors)', reals_text([self%coarse_blr]))
+      call refuse('coarse_blr', 'must be in [0, 1) (0: full-rank factors)', reals_text([self%coarse_blr]), &
+                   variable, rule, got)
     else if (.not. any(self%coarse_factor == [character(len=6) :: 'auto', 'mumps', 'dense'])) then
-      call bad('coarse_factor', "must be 'auto', 'mumps' or 'dense'", self%coarse_factor)
+      call refuse('coarse_factor', "must be 'auto', 'mumps' or 'dense'", self%coarse_factor, &
+                   variable, rule, got)
     else if (self%coarse_factor == 'dense' .and. (self%coarse_ranks > 1 .or. self%coarse_placement == 'distributed')) then
-      call bad('coarse_factor', "'dense' factorizes G G^T on every rank: it needs coarse groups of one "// &
-               "rank (coarse_ranks = 0 or 1, coarse_placement 'auto' or 'redundant')", self%coarse_factor)
+      call refuse('coarse_factor', "'dense' factorizes G G^T on every rank: it needs coarse groups of one "// &
+               "rank (coarse_ranks = 0 or 1, coarse_placement 'auto' or 'redundant')", self%coarse_factor, &
+                            variable, rule, got)
     end if
-  contains
-    subroutine bad(name, text, value)
-      character(len=*), intent(in) :: name, text, value
-      variable = name
-      rule = text
-      got = trim(value)
-    end subroutine bad
   end subroutine coarse_settings_check
+
+  !> The namelist group of these variables.
+  function coarse_settings_group(self) result(name)
+    class(coarse_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'solver'
+  end function coarse_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine coarse_settings_variables(self, names)
+    class(coarse_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'coarse', 'coarse_placement', 'coarse_ranks', 'coarse_blr', &
+        'coarse_ooc', 'coarse_factor']
+  end subroutine coarse_settings_variables
 
   !> Read this component's variables from the group text `group`
   !> ('&solver ... /'); strings lower case.

@@ -164,8 +164,10 @@ contains
     call order_rows(rec, me, con, row_of_rec, urow_first, local_index, ghost_owner)
     ! 3. The rows' data and the B^s entries per local subdomain.
     call fill_rows(rec, urow_first, row_of_rec, local_index, subs, con)
-    call count_rows(comm, rank, con)                          ! 4. sizes
-    call build_exchange(dec, con, ghost_owner, me, sub_dec)   ! 5. exchange pattern
+    ! 4. Sizes.
+    call count_rows(comm, rank, con)
+    ! 5. Exchange pattern.
+    call build_exchange(dec, con, ghost_owner, me, sub_dec)
 
   contains
 
@@ -203,7 +205,7 @@ contains
             if (m == 1 .and. .not. (any(dirichlet) .or. contact)) cycle
             j = findloc(copies(1:m), s_id, 1)
             owner = dec%subdomain_rank(copies(1))
-            w(1:m) = sub_weight(copies(1:m))     ! w_c = E(s_c)/young with scaling = 'young', else 1
+            w(1:m) = sub_weight(copies(1:m))   ! E(s)/young with &solver scaling = 'young', else 1
             cslot = j
           end if
           do comp = 1, 3
@@ -212,26 +214,17 @@ contains
                         row_dirichlet, j, sqrt(w(j)), sqrt(w(j))*value(comp), sqrt(w(j)), sqrt(w(j)))
             else if (all(w(1:m) == 1)) then
               do k = max(1, j - 1), m - 1
-                if (j <= k) then
-                  call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, j, 1/sqrt(real(k*(k + 1), dp)), 0.0_dp, 1.0_dp, sqrt(k/real(k + 1, dp)))
-                else
-                  call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, j, -k/sqrt(real(k*(k + 1), dp)), 0.0_dp, 1.0_dp, sqrt(k/real(k + 1, dp)))
-                end if
+                call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, gid, row_gluing, j, &
+                          merge(1.0_dp, -real(k, dp), j <= k)/sqrt(real(k*(k + 1), dp)), 0.0_dp, 1.0_dp, &
+                          sqrt(k/real(k + 1, dp)))
               end do
             else
               ! weighted Helmert rows (see the module header)
               do k = max(1, j - 1), m - 1
                 sk = sum(w(1:k))
                 alpha = 1/sqrt(sk*(1 + sk/w(k + 1)))
-                if (j <= k) then
-                  call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, j, alpha*w(j), 0.0_dp, 1.0_dp, alpha*sk)
-                else
-                  call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, &
-                            gid, row_gluing, j, -alpha*sk, 0.0_dp, 1.0_dp, alpha*sk)
-                end if
+                call emit(row_key(gid, comp, row_gluing, k), owner, ls, 3*(a - 1) + comp, a, gid, row_gluing, j, &
+                          merge(alpha*w(j), -alpha*sk, j <= k), 0.0_dp, 1.0_dp, alpha*sk)
               end do
             end if
           end do
@@ -255,7 +248,7 @@ contains
     end subroutine emit
   end subroutine build_constraints
 
-  !> w(s) = E(s)/young for every subdomain with &solver scaling = 'young', else 1.
+  !> E(s)/young for every subdomain s with &solver scaling = 'young', else 1.
   !> From the parameters alone: the same on every rank.
   function subdomain_weights(settings, dec) result(w)
     type(feti_settings_t), intent(in) :: settings

@@ -11,36 +11,28 @@ submodule(feti_operators) feti_builder
   use subdomain, only: build_subdomain
   use clusters, only: is_hybrid, unit_mesh, build_cluster
   use assembly, only: assemble_subdomain
-  use coarse_problem, only: choose_coarse_ranks
-  use mpi_f08, only: MPI_Comm_size
-  use errors, only: collective_error, exit_input_error
   use ritz_values, only: tridiagonal_extremes
   use constraints, only: row_dirichlet
   use lapack_interfaces, only: dsyev
   use mpi_f08, only: MPI_MAX
   implicit none
 
-  !> Lanczos steps of the ||P F P|| estimate made in set-up; the rest (to its
-  !> stopping rule) when MPRGP first needs its step length, i.e. never in a
-  !> run that the polish solves alone (docs/THEORY.md "Deferred Lanczos").
-  integer(ip), parameter :: lanczos_setup_steps = 3
-
 contains
 
-  module subroutine setup(this, settings, comm)
+  module subroutine setup(this, settings, comm, units)
     class(feti_t), intent(inout) :: this
     type(feti_settings_t), intent(in) :: settings
     type(MPI_Comm), intent(in) :: comm
+    type(decomposition_t), intent(in), optional :: units
     integer(ip) :: ls, r(2)
     integer :: ierr
     integer(i8) :: mydofs
 
     call this%free()
     this%communicator = comm
-    call check_coarse_ranks()
 
     call timer_start('mesh')
-    call build_units(this, settings, comm)
+    call build_units(this, settings, comm, units)
     call timer_stop('mesh')
     call memory_mark('mesh')
 
@@ -128,36 +120,28 @@ contains
 
     call timer_start('dual setup')
     call dual_data(this, comm)
-    call estimate_norm_pfp(this, settings%f_action%lanczos_steps, lanczos_setup_steps)
+    call estimate_norm_pfp(this, settings%f_action%lanczos_steps, settings%f_action%lanczos_setup_steps)
     call timer_stop('dual setup')
     call memory_mark('dual setup')
 
-  contains
-
-    !> &solver coarse_ranks against the number of ranks, before any set-up
-    !> work (the projector applies the same rule). Collective.
-    subroutine check_coarse_ranks()
-      integer :: nranks, c
-      character(len=300) :: msg
-      call MPI_Comm_size(comm, nranks, ierr)
-      ! units = clusters; an unresolved automatic cluster 0,0,0 (settings made in code) is plain TFETI
-      call choose_coarse_ranks(settings%coarse%coarse_ranks, settings%coarse%coarse_placement, nranks, &
-                               int(product(int(settings%mesh%nsub/max(settings%mesh%cluster, 1_ip), i8)), ip), c, msg)
-      if (len_trim(msg) > 0) call collective_error(msg, comm, exit_input_error)
-    end subroutine check_coarse_ranks
   end subroutine setup
 
   !> The decomposition and the local units (subdomains, or clusters of them
-  !> with hybrid TFETI, `&mesh cluster`) with their geometry.
-  subroutine build_units(this, settings, comm)
+  !> with hybrid TFETI, `&mesh cluster`) with their geometry. `units`: the
+  !> decomposition into the units that the checks before the run built
+  !> (run_checks), else built here.
+  subroutine build_units(this, settings, comm, units)
     class(feti_t), intent(inout) :: this
     type(feti_settings_t), intent(in) :: settings
     type(MPI_Comm), intent(in) :: comm
+    type(decomposition_t), intent(in), optional :: units
     integer(ip) :: ls
     this%hybrid = is_hybrid(settings%mesh)
-    if (this%hybrid) then
-      ! hybrid TFETI: the units are the clusters (src/mesh/clusters.f90)
-      call build_decomposition(settings%mesh, comm, this%sub_dec)
+    ! hybrid TFETI: the units are the clusters (src/mesh/clusters.f90), sub_dec the subdomains
+    if (this%hybrid) call build_decomposition(settings%mesh, comm, this%sub_dec)
+    if (present(units)) then
+      this%dec = units
+    else if (this%hybrid) then
       call build_decomposition(unit_mesh(settings%mesh), comm, this%dec)
     else
       call build_decomposition(settings%mesh, comm, this%dec)
@@ -331,7 +315,7 @@ contains
   !> orthogonality only repeats converged Ritz values, it does not move them
   !> above lambda_max. The estimate scales the dual problem and sets the MPRGP
   !> step 1.9/||A||, which tolerates an underestimate of 5%.
-  !> Deferred: set-up makes `steps` (lanczos_setup_steps)
+  !> Deferred: set-up makes `steps` (&solver lanczos_setup_steps)
   !> of them, whose theta (a lower bound) scales the dual problem; the process
   !> is kept and continued to the stopping rule by refine_norm_pfp when MPRGP
   !> first needs its step length (dual_problem%refined_norm).

@@ -154,10 +154,11 @@ module feti_operators
     !> Everything before the dual solve: decomposition, subdomains, K^+, B, G,
     !> the coarse problem, d, e, lambda~ and ||P F P|| (submodule feti_builder).
     !> Collective over `comm`.
-    module subroutine setup(this, settings, comm)
+    module subroutine setup(this, settings, comm, units)
       class(feti_t), intent(inout) :: this
       type(feti_settings_t), intent(in) :: settings
       type(MPI_Comm), intent(in) :: comm
+      type(decomposition_t), intent(in), optional :: units
     end subroutine setup
     !> Continue the Lanczos estimate of ||P F P|| that set-up began (its
     !> first steps scale the dual problem) until its stopping rule holds:

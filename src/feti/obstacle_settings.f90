@@ -5,15 +5,18 @@
 module obstacle_settings
   use kinds, only: dp, name_len
   use text, only: lower_case, reals_text
+  use settings_base, only: settings_t, refuse
   implicit none
   private
 
-  type, public :: obstacle_settings_t
+  type, extends(settings_t), public :: obstacle_settings_t
     character(len=name_len) :: shape = 'sphere'  !< 'sphere' | 'plane' | 'none'
     real(dp) :: radius = 1  !< sphere radius [mm]
     real(dp) :: gap = 0  !< initial gap below z = 0 [mm]
   contains
     procedure :: check => obstacle_settings_check
+    procedure :: group => obstacle_settings_group
+    procedure :: variables => obstacle_settings_variables
     procedure :: read_namelist => obstacle_settings_read
     procedure :: write_namelist => obstacle_settings_write
   end type obstacle_settings_t
@@ -29,18 +32,25 @@ contains
     rule = ''
     got = ''
     if (.not. any(self%shape == [character(len=8) :: 'sphere', 'plane', 'none'])) then
-      call bad('shape', "must be 'sphere', 'plane' or 'none'", self%shape)
+      call refuse('shape', "must be 'sphere', 'plane' or 'none'", self%shape, variable, rule, got)
     else if (self%radius <= 0) then
-      call bad('radius', 'must be > 0', reals_text([self%radius]))
+      call refuse('radius', 'must be > 0', reals_text([self%radius]), variable, rule, got)
     end if
-  contains
-    subroutine bad(name, text, value)
-      character(len=*), intent(in) :: name, text, value
-      variable = name
-      rule = text
-      got = trim(value)
-    end subroutine bad
   end subroutine obstacle_settings_check
+
+  !> The namelist group of these variables.
+  function obstacle_settings_group(self) result(name)
+    class(obstacle_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'obstacle'
+  end function obstacle_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine obstacle_settings_variables(self, names)
+    class(obstacle_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'shape', 'radius', 'gap']
+  end subroutine obstacle_settings_variables
 
   !> Read this component's variables from the group text `group`
   !> ('&obstacle ... /'); strings lower case.

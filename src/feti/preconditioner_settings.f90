@@ -5,16 +5,19 @@
 module preconditioner_settings
   use kinds, only: dp, name_len
   use text, only: lower_case, reals_text
+  use settings_base, only: settings_t, refuse
   implicit none
   private
 
-  type, public :: preconditioner_settings_t
+  type, extends(settings_t), public :: preconditioner_settings_t
     !> MPRGP preconditioned in the face: 'none' | 'lumped' | 'dirichlet' | 'auto'
     !> ('lumped' until the face condition estimate exceeds preconditioner_switch,
     character(len=name_len) :: preconditioner = 'auto'  !< then 'dirichlet')
     real(dp) :: preconditioner_switch = 100  !< 'auto': the face condition estimate that switches
   contains
     procedure :: check => preconditioner_settings_check
+    procedure :: group => preconditioner_settings_group
+    procedure :: variables => preconditioner_settings_variables
     procedure :: read_namelist => preconditioner_settings_read
     procedure :: write_namelist => preconditioner_settings_write
   end type preconditioner_settings_t
@@ -30,18 +33,27 @@ contains
     rule = ''
     got = ''
     if (.not. any(self%preconditioner == [character(len=9) :: 'none', 'lumped', 'dirichlet', 'auto'])) then
-      call bad('preconditioner', "must be 'none', 'lumped', 'dirichlet' or 'auto'", self%preconditioner)
+      call refuse('preconditioner', "must be 'none', 'lumped', 'dirichlet' or 'auto'", self%preconditioner, &
+                   variable, rule, got)
     else if (.not. (self%preconditioner_switch > 1 .and. self%preconditioner_switch <= huge(1.0_dp))) then
-      call bad('preconditioner_switch', 'must be > 1 (a condition number)', reals_text([self%preconditioner_switch]))
+      call refuse('preconditioner_switch', 'must be > 1 (a condition number)', reals_text([self%preconditioner_switch]), &
+                   variable, rule, got)
     end if
-  contains
-    subroutine bad(name, text, value)
-      character(len=*), intent(in) :: name, text, value
-      variable = name
-      rule = text
-      got = trim(value)
-    end subroutine bad
   end subroutine preconditioner_settings_check
+
+  !> The namelist group of these variables.
+  function preconditioner_settings_group(self) result(name)
+    class(preconditioner_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'solver'
+  end function preconditioner_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine preconditioner_settings_variables(self, names)
+    class(preconditioner_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'preconditioner', 'preconditioner_switch']
+  end subroutine preconditioner_settings_variables
 
   !> Read this component's variables from the group text `group`
   !> ('&solver ... /'); strings lower case.

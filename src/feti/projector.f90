@@ -9,7 +9,8 @@ module projector
   use decomposition, only: decomposition_t
   use constraints, only: constraints_t, row_contact
   use coarse_problem, only: coarse_problem_t, coarse_layout_t, build_coarse_layout, coarse_options_t, &
-                            choose_coarse_ranks, ranks_per_node, dense_for, gathered_counts
+                            choose_coarse_ranks, ranks_per_node, dense_for, gathered_counts, &
+                            estimated_factor_bytes
   use sorting, only: sort_permutation
   use coarse_settings, only: coarse_settings_t
   use errors, only: collective_error, exit_input_error
@@ -24,6 +25,17 @@ module projector
   integer, parameter :: masked_base = 1          !< G_E G_E^T, the base of low-rank updates
   integer, parameter :: masked_refactorized = 2  !< G_M G_M^T of the last mask
   integer, parameter :: masked_view = 3          !< a Schur view of the coarse problem (coarse_schur)
+
+  !> The coarse problem's decisions for a run, made before any set-up work
+  !> (plan_coarse): what the checks report and what the projector builds.
+  type, public :: coarse_plan_t
+    integer :: group_ranks = 1                 !< ranks per coarse group
+    logical :: dense = .false.                 !< G G^T by the dense LAPACK factor (groups of one rank)
+    real(dp) :: factor_bytes = 0               !< estimated bytes of the coarse factor per rank
+    character(len=300) :: refusal = ''         !< not empty: the settings do not fit these ranks (an input error)
+  end type coarse_plan_t
+
+  public :: plan_coarse
 
   type, public :: projector_t
     private
@@ -70,17 +82,15 @@ contains
     type(constraints_t), pointer :: con
     integer(ip), allocatable :: schur_positions(:)
     real(dp), allocatable :: schur_gram(:, :, :)
-    integer :: nranks, ierr, c
+    type(coarse_plan_t) :: plan
+    integer :: nranks, ierr
     character(len=300) :: msg
     call this%free()
     this%comm = comm
     call MPI_Comm_size(comm, nranks, ierr)
-    call choose_coarse_ranks(s%coarse_ranks, s%coarse_placement, nranks, dec%nsubdomains, c, msg, &
-                             node_ranks=ranks_per_node(comm))
-    if (len_trim(msg) > 0) call collective_error(msg, comm, exit_input_error)
-    ! the dense factor lives on every rank: groups of one rank
-    if (s%coarse_factor == 'dense') c = 1
-    this%options = coarse_options_t(c, s%coarse_blr, s%coarse_ooc, s%coarse_factor)
+    plan = plan_coarse(s, nranks, dec%nsubdomains, ranks_per_node(comm))
+    if (len_trim(plan%refusal) > 0) call collective_error(plan%refusal, comm, exit_input_error)
+    this%options = coarse_options_t(plan%group_ranks, s%coarse_blr, s%coarse_ooc, s%coarse_factor)
     con => b%constraints()
     call build_coarse_layout(dec, comm, this%layout)
     call contact_face_subdomains(this, dec, con, regular_base, schur_positions, schur_gram)
@@ -111,6 +121,32 @@ contains
     end if
     allocate (this%cwork(6*this%layout%nlocal), this%cwork2(6*this%layout%nlocal))
   end subroutine init
+
+  !> The decisions of the coarse problem of `nunits` subdomains (clusters) on
+  !> `nranks` ranks, `node_ranks` of them per node (ranks_per_node): the
+  !> ranks per group (choose_coarse_ranks; one with coarse_factor 'dense',
+  !> whose factor lives on every rank), the factor kind (dense_for) and its
+  !> memory per rank (dense 8 n^2, n = 6 units, on a one-rank group or with
+  !> the explicit G~; else the MUMPS estimate shared by the group's ranks).
+  !> `refusal` names a value these ranks cannot take. The checks before a
+  !> run and `init` both decide here.
+  function plan_coarse(s, nranks, nunits, node_ranks) result(plan)
+    type(coarse_settings_t), intent(in) :: s
+    integer, intent(in) :: nranks, node_ranks
+    integer(ip), intent(in) :: nunits
+    type(coarse_plan_t) :: plan
+    real(dp) :: n
+    call choose_coarse_ranks(s%coarse_ranks, s%coarse_placement, nranks, nunits, plan%group_ranks, plan%refusal, &
+                             node_ranks=node_ranks)
+    if (s%coarse_factor == 'dense') plan%group_ranks = 1
+    plan%dense = dense_for(s%coarse_factor, 6*nunits, plan%group_ranks)
+    n = 6*real(nunits, dp)
+    if (s%coarse == 'orthonormal' .or. plan%dense) then
+      plan%factor_bytes = 8*n*n
+    else
+      plan%factor_bytes = real(estimated_factor_bytes(nunits), dp)/max(plan%group_ranks, 1)
+    end if
+  end function plan_coarse
 
   !> x = (G G^T)^{-1} rhs on local coarse blocks.
   subroutine solve(this, rhs, x)
@@ -261,21 +297,20 @@ contains
       all_rows = all(mask(1:n))
       call MPI_Allreduce(MPI_IN_PLACE, all_rows, 1, MPI_LOGICAL, MPI_LAND, this%comm, ierr)
     end function all_rows
-
   end function masked_coarse
 
-  !> The low-rank update of the masked instance (masked_coarse): the columns
-  !> of V for the k contact rows of the mask (k_mine of them here), with their
-  !> keys, handed to coarse_problem%set_update. Collective.
+  !> The low-rank update of masked_coarse: G_M G_M^T = G_E G_E^T + V V^T with
+  !> V's column j = G e_r for the j-th contact row r of `mask` (global order:
+  !> rank, then row), `k_mine` of them on this rank, `k` in all. Collective.
   subroutine low_rank_update(this, con, mask, contact, k_mine, k)
-    class(projector_t), intent(inout), target :: this
+    class(projector_t), intent(inout) :: this
     type(constraints_t), intent(inout) :: con
     logical, intent(in) :: mask(:), contact(:)
     integer(ip), intent(in) :: k_mine, k
-    integer(ip) :: offset, c_mine, c_offset, c, i, j, ls, e
-    integer :: ierr, rank
     real(dp), allocatable :: col(:), wloc(:), v(:, :)
+    integer(ip) :: ls, e, offset, c_mine, c_offset, c, i, j
     integer(i8), allocatable :: my_keys(:), keys(:)
+    integer :: ierr, rank
     ! V: column j is G e_r for the j-th contact row r of the mask (global order: rank, then row)
     offset = 0
     call MPI_Exscan(k_mine, offset, 1, MPI_INT_IP, MPI_SUM, this%comm, ierr)
@@ -315,7 +350,7 @@ contains
     call timer_stop('face: update')
   end subroutine low_rank_update
 
-  !> The keys of all ranks in rank order (k of them in all). Collective.
+  !> The keys of all ranks of `comm` in rank order (k of them in all). Collective.
   function gather_keys(comm, mine, k) result(all)
     type(MPI_Comm), intent(in) :: comm
     integer(i8), intent(in) :: mine(:)

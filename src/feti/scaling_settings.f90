@@ -5,13 +5,16 @@
 module scaling_settings
   use kinds, only: name_len
   use text, only: lower_case
+  use settings_base, only: settings_t, refuse
   implicit none
   private
 
-  type, public :: scaling_settings_t
+  type, extends(settings_t), public :: scaling_settings_t
     character(len=name_len) :: scaling = 'young'  !< rows of B weighted by Young's moduli: 'young' | 'none'
   contains
     procedure :: check => scaling_settings_check
+    procedure :: group => scaling_settings_group
+    procedure :: variables => scaling_settings_variables
     procedure :: read_namelist => scaling_settings_read
     procedure :: write_namelist => scaling_settings_write
   end type scaling_settings_t
@@ -27,15 +30,22 @@ contains
     rule = ''
     got = ''
     if (.not. any(self%scaling == [character(len=8) :: 'none', 'young'])) &
-      call bad('scaling', "must be 'none' or 'young'", self%scaling)
-  contains
-    subroutine bad(name, text, value)
-      character(len=*), intent(in) :: name, text, value
-      variable = name
-      rule = text
-      got = trim(value)
-    end subroutine bad
+      call refuse('scaling', "must be 'none' or 'young'", self%scaling, variable, rule, got)
   end subroutine scaling_settings_check
+
+  !> The namelist group of these variables.
+  function scaling_settings_group(self) result(name)
+    class(scaling_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'solver'
+  end function scaling_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine scaling_settings_variables(self, names)
+    class(scaling_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'scaling']
+  end subroutine scaling_settings_variables
 
   !> Read this component's variables from the group text `group`
   !> ('&solver ... /'); strings lower case.

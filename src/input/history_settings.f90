@@ -9,15 +9,16 @@
 module history_settings
   use kinds, only: dp, ip, name_len
   use text, only: lower_case
+  use settings_base, only: settings_t, refuse
   implicit none
   private
 
-  !> the most steps of one history (fixed: params_t is broadcast as bytes)
+  !> the most steps of one history
   integer(ip), parameter, public :: max_steps = 1000
   !> a gap or factor that was not given
   real(dp), parameter :: unset = -huge(1.0_dp)
 
-  type, public :: history_settings_t
+  type, extends(settings_t), public :: history_settings_t
     logical :: given = .false.                  !< the input has the group (not a namelist variable)
     integer(ip) :: nsteps = 1                   !< steps of the history
     !> load factors: 'ramp' (factor_peak i/nsteps), 'load_unload' (up to
@@ -34,6 +35,8 @@ module history_settings
     logical :: recycle = .false.
   contains
     procedure :: check => history_check
+    procedure :: group => history_group
+    procedure :: variables => history_variables
     procedure :: read_namelist => history_read
     procedure :: write_namelist => history_write
     procedure :: factor => history_factor
@@ -56,37 +59,33 @@ contains
     n = self%nsteps
     if (n < 1 .or. n > max_steps) then
       write (buf, '(i0)') max_steps
-      call bad('nsteps', 'must be in [1, '//trim(buf)//']', int_text(n))
+      call refuse('nsteps', 'must be in [1, '//trim(buf)//']', int_text(n), variable, rule, got)
     else if (.not. any(self%path == [character(len=11) :: 'ramp', 'load_unload', 'list'])) then
-      call bad('path', "must be 'ramp', 'load_unload' or 'list'", self%path)
+      call refuse('path', "must be 'ramp', 'load_unload' or 'list'", self%path, variable, rule, got)
     else if (.not. (self%factor_peak > 0 .and. self%factor_peak <= huge(1.0_dp))) then
-      call bad('factor_peak', 'must be > 0', real_text(self%factor_peak))
+      call refuse('factor_peak', 'must be > 0', real_text(self%factor_peak), variable, rule, got)
     else if (self%path == 'list' .and. any(self%load_factors(1:n) == unset)) then
-      call bad('load_factors', "needs nsteps values with path = 'list'", int_text(count(self%load_factors /= unset)) &
-               //' values for nsteps = '//int_text(n))
+      call refuse('load_factors', "needs nsteps values with path = 'list'", int_text(count(self%load_factors /= unset)) &
+               //' values for nsteps = '//int_text(n), variable, rule, got)
     else if (self%path /= 'list' .and. any(self%load_factors /= unset)) then
-      call bad('load_factors', "is for path = 'list' only", trim(self%path))
+      call refuse('load_factors', "is for path = 'list' only", trim(self%path), variable, rule, got)
     else if (self%path == 'list' .and. any(self%load_factors(n + 1:) /= unset)) then
-      call bad('load_factors', 'has more values than nsteps', int_text(count(self%load_factors /= unset)) &
-               //' values for nsteps = '//int_text(n))
+      call refuse('load_factors', 'has more values than nsteps', int_text(count(self%load_factors /= unset)) &
+               //' values for nsteps = '//int_text(n), variable, rule, got)
     else if (self%path == 'list' .and. .not. all(self%load_factors(1:n) > 0)) then
-      call bad('load_factors', 'each factor must be > 0', real_text(minval(self%load_factors(1:n))))
+      call refuse('load_factors', 'each factor must be > 0', real_text(minval(self%load_factors(1:n))), &
+                   variable, rule, got)
     else if (any(self%gaps /= unset) .and. &
              (any(self%gaps(1:n) == unset) .or. any(self%gaps(n + 1:) /= unset))) then
-      call bad('gaps', 'needs exactly nsteps values when given', int_text(count(self%gaps /= unset)) &
-               //' values for nsteps = '//int_text(n))
+      call refuse('gaps', 'needs exactly nsteps values when given', int_text(count(self%gaps /= unset)) &
+               //' values for nsteps = '//int_text(n), variable, rule, got)
     else if (.not. (self%time_limit >= 0)) then
-      call bad('time_limit', 'must be >= 0 seconds (0: none)', real_text(self%time_limit))
+      call refuse('time_limit', 'must be >= 0 seconds (0: none)', real_text(self%time_limit), &
+                   variable, rule, got)
     else if (self%recycle .and. .not. self%warm_start) then
-      call bad('recycle', 'needs warm_start = .true. (the directions are part of the warm start)', 'T')
+      call refuse('recycle', 'needs warm_start = .true. (the directions are part of the warm start)', 'T', &
+                   variable, rule, got)
     end if
-  contains
-    subroutine bad(name, text, value)
-      character(len=*), intent(in) :: name, text, value
-      variable = name
-      rule = text
-      got = trim(value)
-    end subroutine bad
   end subroutine history_check
 
   !> A history of more than one step, or a restart: the history driver runs.
@@ -123,6 +122,21 @@ contains
     history_gap = base
     if (self%gaps(i) /= unset) history_gap = self%gaps(i)
   end function history_gap
+
+  !> The namelist group of these variables.
+  function history_group(self) result(name)
+    class(history_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'history'
+  end function history_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine history_variables(self, names)
+    class(history_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'nsteps', 'path', 'factor_peak', 'load_factors', 'gaps', &
+        'checkpoint', 'restart', 'time_limit', 'warm_start', 'recycle']
+  end subroutine history_variables
 
   !> Read the group text `group` ('&history ... /'); strings lower case.
   subroutine history_read(self, group, status, msg)

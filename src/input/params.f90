@@ -1,16 +1,20 @@
-!> Run parameters: the namelist groups, their defaults, reading, checking,
-!> broadcasting and echoing.
+!> Run parameters: the namelist groups, their defaults, reading, checking
+!> and echoing.
 !>
-!> Rank 0 reads the whole file, splits it into groups, reads each group with
-!> an internal namelist read, and checks the values. When a group fails to
-!> read, its assignments are read again one by one so that the message can
-!> name the variable at fault. The outcome (parameters or an error message) is
-!> broadcast, and on error every rank exits together with status 2.
-!> Every variable is documented in docs/INPUT.md.
+!> Every component's settings type (settings_base::settings_t) declares its
+!> group, its variables and its namelist; `components` is the one list of
+!> them, and reading, writing and checking loop over it. Rank 0 reads the
+!> file and broadcasts its text; every rank splits it into groups, hands each
+!> group to its owners (an internal namelist read each) and checks the
+!> values. When a group fails to read, its assignments are read again one by
+!> one so that the message can name the variable at fault. On an error every
+!> rank exits together with status 2 (rank 0 says why). Every variable is
+!> documented in docs/INPUT.md.
 module params
   use kinds, only: dp, ip, i8, path_len, name_len
   use errors, only: collective_error, exit_input_error, fatal_error, set_input_file
-  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast, MPI_BYTE, MPI_INTEGER, MPI_CHARACTER
+  use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Comm_size, MPI_Bcast, MPI_Allreduce, MPI_MAX, MPI_INTEGER, &
+                     MPI_CHARACTER
   use smalbe, only: smalbe_settings_t
   use mesh_settings, only: mesh_settings_t
   use materials, only: material_settings_t
@@ -27,18 +31,19 @@ module params
   use dual_settings, only: dual_settings_t
   use reconstruction_settings, only: reconstruction_settings_t
   use output_settings, only: output_settings_t
+  use settings_base, only: settings_t
   implicit none
   private
 
   public :: read_params, check_params, echo_params, input_warnings, default_params, param_items, group_names
-  public :: auto_cluster, resolve_cluster, feti_settings_of
+  public :: auto_cluster, resolve_cluster, feti_settings_of, components
 
   integer, parameter :: msg_len = 1024
   !> &obstacle gap: the deepest initial penetration accepted, as a fraction of the body's height
   real(dp), parameter, public :: max_penetration = 0.1_dp
 
   !> &solver: each variable belongs to the component that owns it (its
-  !> settings type: defaults, checks, namelist variables); solver_group hands
+  !> settings type: defaults, checks, namelist variables); read_group hands
   !> each assignment to its owner.
   type, public :: solver_params_t
     type(smalbe_settings_t) :: smalbe             !< SMALBE, its inner MPRGP and the polish
@@ -79,6 +84,11 @@ module params
     type(history_settings_t) :: history
   end type params_t
 
+  !> A settings type of a run: a component of params_t (see components).
+  type, public :: component_t
+    class(settings_t), pointer :: s => null()
+  end type component_t
+
   !> The namelist groups, in the order of the echo and of report.json.
   character(len=*), parameter :: group_names(9) = [character(len=14) :: 'mesh', 'material', &
     'load', 'boundary', 'obstacle', 'solver', 'reconstruction', 'output', 'history']
@@ -91,50 +101,64 @@ contains
     p = params_t()
   end function default_params
 
-  !> Read, check and broadcast the parameters of `file`. Collective over
-  !> `comm`; on any input error every rank exits with status 2.
+  !> Read and check the parameters of `file`. Collective over `comm`: rank
+  !> 0 reads the file and broadcasts its text, every rank reads the groups
+  !> from it and checks them (the same text gives the same values and the
+  !> same verdict everywhere); on any input error every rank exits with
+  !> status 2 and rank 0 says why.
   subroutine read_params(file, comm, p)
     character(len=*), intent(in) :: file
     type(MPI_Comm), intent(in) :: comm
     type(params_t), intent(out) :: p
-    integer :: rank, nranks, ierr, status
+    integer :: rank, nranks, ierr, status, worst, length
     character(len=msg_len) :: msg
+    character(len=:), allocatable :: text
 
     call MPI_Comm_rank(comm, rank, ierr)
     call MPI_Comm_size(comm, nranks, ierr)
     call set_input_file(file)       ! the refusals at run time name it too
     status = 0
     msg = ''
-    p = params_t()
+    length = 0
     if (rank == 0) then
-      call read_file(file, p, status, msg)
-      if (status == 0) call check_params(p, status, msg)
-      if (status == 0) then
-        call resolve_cluster(p, nranks)
-        call check_params(p, status, msg)     ! (the automatic choice meets every check by construction)
-      end if
+      call load_text(file, text, status, msg)
+      if (status == 0) length = len(text)
     end if
     call MPI_Bcast(status, 1, MPI_INTEGER, 0, comm, ierr)
     if (status /= 0) then
       call MPI_Bcast(msg, msg_len, MPI_CHARACTER, 0, comm, ierr)
       call collective_error(msg, comm, exit_input_error)
     end if
-    call MPI_Bcast(p, storage_size(p)/8, MPI_BYTE, 0, comm, ierr)
+    call MPI_Bcast(length, 1, MPI_INTEGER, 0, comm, ierr)
+    if (rank /= 0) allocate (character(len=length) :: text)
+    if (length > 0) call MPI_Bcast(text, length, MPI_CHARACTER, 0, comm, ierr)
+    p = params_t()
+    call read_text(file, text, p, status, msg)
+    if (status == 0) call check_params(p, status, msg)
+    if (status == 0) then
+      call resolve_cluster(p, nranks)
+      call check_params(p, status, msg)     ! (the automatic choice meets every check by construction)
+    end if
+    call MPI_Allreduce(status, worst, 1, MPI_INTEGER, MPI_MAX, comm, ierr)
+    if (worst /= 0) then
+      call MPI_Bcast(msg, msg_len, MPI_CHARACTER, 0, comm, ierr)
+      call collective_error(msg, comm, exit_input_error)
+    end if
   end subroutine read_params
 
-  !> Read every group of `file` into `p` (rank 0 only).
-  subroutine read_file(file, p, status, msg)
-    character(len=*), intent(in) :: file
+  !> Read every group of the input's text `text` (load_text of `file`) into `p`.
+  subroutine read_text(file, text, p, status, msg)
+    character(len=*), intent(in) :: file, text
     type(params_t), intent(inout) :: p
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
-    character(len=:), allocatable :: text, group_text, name
+    character(len=:), allocatable :: group_text, name
     integer :: pos, i
     logical :: seen(size(group_names))
 
     p%file = file
-    call load_text(file, text, status, msg)
-    if (status /= 0) return
+    status = 0
+    msg = ''
     seen = .false.
     pos = 1
     do
@@ -166,7 +190,7 @@ contains
         return
       end if
     end do
-  end subroutine read_file
+  end subroutine read_text
 
   !> The whole file as one line: comments removed, line ends made blanks.
   subroutine load_text(file, text, status, msg)
@@ -556,95 +580,116 @@ contains
     end if
   end subroutine assignment_starts
 
-  !> The dispatcher of the groups: each group's owner reads it from
-  !> `group_text` into `p` or, without `group_text`, writes it (as the
-  !> compiler writes a namelist, strings quoted) into `written`. Adding a
-  !> variable: a component with its default in its owner's settings type, in
-  !> its owner's namelist and check; the echo and report.json follow.
+  !> Every settings type of a run (pointers into `p`), in the order of
+  !> group_names and, within a group, of the echo. The one list of the
+  !> components: reading, writing and checking loop over it. A new component:
+  !> its field in params_t (solver_params_t for &solver) and its entry here.
+  subroutine components(p, c)
+    type(params_t), intent(in), target :: p
+    type(component_t), allocatable, intent(out) :: c(:)
+    allocate (c(17))
+    c(1)%s => p%mesh
+    c(2)%s => p%material
+    c(3)%s => p%load
+    c(4)%s => p%boundary
+    c(5)%s => p%obstacle
+    c(6)%s => p%solver%smalbe
+    c(7)%s => p%solver%smalbe%inner
+    c(8)%s => p%solver%smalbe%polish
+    c(9)%s => p%solver%dual
+    c(10)%s => p%solver%f_action
+    c(11)%s => p%solver%coarse
+    c(12)%s => p%solver%local
+    c(13)%s => p%solver%scaling
+    c(14)%s => p%solver%preconditioner
+    c(15)%s => p%reconstruction
+    c(16)%s => p%output
+    c(17)%s => p%history
+  end subroutine components
+
+  !> The components that own the variables of group `name`.
+  subroutine group_owners(p, name, owners)
+    type(params_t), intent(in), target :: p
+    character(len=*), intent(in) :: name
+    type(component_t), allocatable, intent(out) :: owners(:)
+    type(component_t), allocatable :: c(:)
+    integer :: k
+    call components(p, c)
+    allocate (owners(0))
+    do k = 1, size(c)
+      if (c(k)%s%group() == name) owners = [owners, c(k)]
+    end do
+  end subroutine group_owners
+
+  !> Group `name` of `p`: its owners read it from `group_text` or, without
+  !> `group_text`, write it into `written` (from its first line '&name',
+  !> without the closing '/'; strings quoted).
   subroutine group_namelist(name, p, status, msg, group_text, written)
     character(len=*), intent(in) :: name
-    type(params_t), intent(inout) :: p
+    type(params_t), intent(inout), target :: p
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
     character(len=*), intent(in), optional :: group_text
     character(len=*), intent(out), optional :: written(:)
-    logical :: reading
+    type(component_t), allocatable :: owners(:)
 
     msg = ''
     status = 0
-    reading = present(group_text)
-    if (present(written)) written = ''
-    select case (name)
-    case ('mesh')
-      if (reading) call p%mesh%read_namelist(group_text, status, msg)
-      if (.not. reading) call p%mesh%write_namelist(written, status, msg)
-    case ('material')
-      if (reading) call p%material%read_namelist(group_text, status, msg)
-      if (.not. reading) call p%material%write_namelist(written, status, msg)
-    case ('load')
-      if (reading) call p%load%read_namelist(group_text, status, msg)
-      if (.not. reading) call p%load%write_namelist(written, status, msg)
-    case ('history')
-      if (reading) call p%history%read_namelist(group_text, status, msg)
-      if (.not. reading) call p%history%write_namelist(written, status, msg)
-    case ('boundary')
-      if (reading) call p%boundary%read_namelist(group_text, status, msg)
-      if (.not. reading) call p%boundary%write_namelist(written, status, msg)
-    case ('obstacle')
-      if (reading) call p%obstacle%read_namelist(group_text, status, msg)
-      if (.not. reading) call p%obstacle%write_namelist(written, status, msg)
-    case ('solver')
-      if (reading) call solver_group(p%solver, group_text, status, msg)
-      if (.not. reading) call solver_group(p%solver, status=status, msg=msg, written=written)
-    case ('reconstruction')
-      if (reading) call p%reconstruction%read_namelist(group_text, status, msg)
-      if (.not. reading) call p%reconstruction%write_namelist(written, status, msg)
-    case ('output')
-      if (reading) call p%output%read_namelist(group_text, status, msg)
-      if (.not. reading) call p%output%write_namelist(written, status, msg)
-    end select
+    call group_owners(p, name, owners)
+    if (present(group_text)) then
+      call read_group(owners, name, group_text, status, msg)
+    else
+      call write_group(owners, name, written, status, msg)
+    end if
   end subroutine group_namelist
 
-  !> The dispatcher of &solver: each assignment of `group_text` goes to the
-  !> component that owns the variable (SMALBE, its inner MPRGP, the polish,
-  !> the dual problem, the coarse problem, the local solver, the F action,
-  !> the preconditioner, the row scaling: each reads its own variables with
-  !> its own namelist); an assignment no component owns goes to SMALBE, whose
-  !> read refuses it. Without `group_text`: the components write their
-  !> variables into `written` (from its first line '&SOLVER', without the
-  !> closing '/').
-  subroutine solver_group(settings, group_text, status, msg, written)
-    type(solver_params_t), intent(inout) :: settings
-    character(len=*), intent(in), optional :: group_text
+  !> Each owner writes its variables; `written` gets them one after the other.
+  subroutine write_group(owners, name, written, status, msg)
+    type(component_t), intent(in) :: owners(:)
+    character(len=*), intent(in) :: name
+    character(len=*), intent(out) :: written(:)
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
-    character(len=*), intent(out), optional :: written(:)
-    integer, parameter :: n_parts = 9
-    character(len=:), allocatable :: body, piece, name, part(:)
-    character(len=path_len + 64) :: lines(64)
-    type(param_item_t), allocatable :: items(:)
+    character(len=:), allocatable :: lines(:)
+    integer :: o, k, line
+    allocate (character(len=len(written)) :: lines(size(written)))
+    written = ''
+    written(1) = '&'//name
+    line = 1
+    do o = 1, size(owners)
+      call owners(o)%s%write_namelist(lines, status, msg)
+      if (status /= 0) return
+      do k = 1, size(lines)
+        if (len_trim(lines(k)) == 0) cycle
+        if (adjustl(lines(k)) == '/' .or. lines(k)(1:1) == '&') cycle
+        line = line + 1
+        written(line) = lines(k)
+      end do
+    end do
+  end subroutine write_group
+
+  !> The owners read the group text '&name ... /'. A group of one owner goes
+  !> to it whole; in a group of several (&solver), each assignment goes to
+  !> the owner that declares the variable (an assignment no owner declares to
+  !> the first, whose read refuses it), and every owner reads its part (an
+  !> empty part leaves its values as they are).
+  subroutine read_group(owners, name, group_text, status, msg)
+    type(component_t), intent(in) :: owners(:)
+    character(len=*), intent(in) :: name, group_text
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
+    character(len=:), allocatable :: body, piece, lhs, part(:)
+    character(len=name_len), allocatable :: names(:)
     integer, allocatable :: starts(:)
-    integer :: c, k, i, nstarts, body_start, line, owner
+    integer :: o, k, i, nstarts, body_start, owner
 
     status = 0
     msg = ''
-    if (.not. present(group_text)) then
-      written = ''
-      written(1) = '&SOLVER'
-      line = 1
-      do c = 1, n_parts
-        call write_part(c, lines)
-        if (status /= 0) return
-        do k = 1, size(lines)
-          if (len_trim(lines(k)) == 0) cycle
-          if (adjustl(lines(k)) == '/' .or. lines(k)(1:1) == '&') cycle
-          line = line + 1
-          written(line) = lines(k)
-        end do
-      end do
+    if (size(owners) == 1) then
+      call owners(1)%s%read_namelist(group_text, status, msg)
       return
     end if
-    allocate (character(len=len(group_text)) :: part(n_parts))
+    allocate (character(len=len(group_text)) :: part(size(owners)))
     part = ''
     body_start = index(group_text, ' ')
     if (body_start == 0) body_start = len(group_text)
@@ -659,99 +704,67 @@ contains
       i = index(piece, '=')
       owner = 1
       if (i > 0) then
-        name = lower(trim(adjustl(piece(1:i - 1))))
-        do c = 1, n_parts
-          call write_part(c, lines)
-          if (status /= 0) return
-          call parse_namelist(join(lines), items)
-          if (any(items%name == name)) then
-            owner = c
+        lhs = lower(trim(adjustl(piece(1:i - 1))))
+        do o = 1, size(owners)
+          call owners(o)%s%variables(names)
+          if (any(names == lhs)) then
+            owner = o
             exit
           end if
         end do
       end if
       part(owner) = trim(part(owner))//' '//piece
     end do
-    ! every component reads (an empty group leaves its values as they are)
-    do c = 1, n_parts
-      call read_part(c, '&solver '//trim(part(c))//' /')
+    do o = 1, size(owners)
+      call owners(o)%s%read_namelist('&'//name//' '//trim(part(o))//' /', status, msg)
       if (status /= 0) return
     end do
-  contains
-    subroutine read_part(c, text)
-      integer, intent(in) :: c
-      character(len=*), intent(in) :: text
-      select case (c)
-      case (1)
-        call settings%smalbe%read_namelist(text, status, msg)
-      case (2)
-        call settings%smalbe%inner%read_namelist(text, status, msg)
-      case (3)
-        call settings%smalbe%polish%read_namelist(text, status, msg)
-      case (4)
-        call settings%dual%read_namelist(text, status, msg)
-      case (5)
-        call settings%f_action%read_namelist(text, status, msg)
-      case (6)
-        call settings%coarse%read_namelist(text, status, msg)
-      case (7)
-        call settings%local%read_namelist(text, status, msg)
-      case (8)
-        call settings%scaling%read_namelist(text, status, msg)
-      case (9)
-        call settings%preconditioner%read_namelist(text, status, msg)
-      end select
-    end subroutine read_part
-    subroutine write_part(c, out)
-      integer, intent(in) :: c
-      character(len=*), intent(out) :: out(:)
-      select case (c)
-      case (1)
-        call settings%smalbe%write_namelist(out, status, msg)
-      case (2)
-        call settings%smalbe%inner%write_namelist(out, status, msg)
-      case (3)
-        call settings%smalbe%polish%write_namelist(out, status, msg)
-      case (4)
-        call settings%dual%write_namelist(out, status, msg)
-      case (5)
-        call settings%f_action%write_namelist(out, status, msg)
-      case (6)
-        call settings%coarse%write_namelist(out, status, msg)
-      case (7)
-        call settings%local%write_namelist(out, status, msg)
-      case (8)
-        call settings%scaling%write_namelist(out, status, msg)
-      case (9)
-        call settings%preconditioner%write_namelist(out, status, msg)
-      end select
-    end subroutine write_part
-    function join(out) result(text)
-      character(len=*), intent(in) :: out(:)
-      character(len=:), allocatable :: text
-      integer :: j
-      text = ''
-      do j = 2, size(out)
-        text = text//' '//trim(out(j))
-      end do
-    end function join
-  end subroutine solver_group
+  end subroutine read_group
 
   !> Check every value; the first violation gives `status` /= 0 and a message
-  !> naming the group, the variable and the allowed values.
+  !> naming the group, the variable and the allowed values: each component's
+  !> own check (in the order of components), then the checks across groups.
   subroutine check_params(p, status, msg)
-    type(params_t), intent(in) :: p
+    type(params_t), intent(in), target :: p
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
     character(len=:), allocatable :: variable, rule, got
+    type(component_t), allocatable :: c(:)
+    integer :: k
+
+    status = 0
+    msg = ''
+    call components(p, c)
+    do k = 1, size(c)
+      call c(k)%s%check(variable, rule, got)
+      if (len(variable) > 0) then
+        status = 1
+        msg = refusal(p, c(k)%s%group(), variable, rule, got)
+        return
+      end if
+    end do
+    call check_across_groups(p, status, msg)
+  end subroutine check_params
+
+  !> The message of a refused value (the tests of tests/input expect this form).
+  function refusal(p, group, variable, rule, got) result(msg)
+    type(params_t), intent(in) :: p
+    character(len=*), intent(in) :: group, variable, rule, got
+    character(len=:), allocatable :: msg
+    msg = 'file '//trim(p%file)//', group &'//group//', variable '//variable//': '//rule//' (got '//trim(got)//')'
+  end function refusal
+
+  !> The checks of values against other groups' values.
+  subroutine check_across_groups(p, status, msg)
+    type(params_t), intent(in) :: p
+    integer, intent(out) :: status
+    character(len=*), intent(out) :: msg
     real(dp), allocatable :: step_gaps(:)
     integer(ip) :: k
 
     status = 0
     msg = ''
     associate (m => p%mesh)
-      call m%check(variable, rule, got)
-      if (len(variable) > 0) call fail('mesh', variable, rule, got)
       if (any(m%cluster > 1)) then
         if (p%material%variation /= 'none') call fail('mesh', 'cluster', &
           "> 1 (hybrid TFETI) needs &material variation = 'none'", ints(m%cluster))
@@ -766,8 +779,6 @@ contains
           ints(m%cluster))
       end if
     end associate
-    call p%material%check(variable, rule, got)
-    if (len(variable) > 0) call fail('material', variable, rule, got)
     associate (b => p%boundary)
       ! frictionless contact holds u_z only: without the top face, the symmetry planes must hold
       ! the x and y translations and the rotation about z, and an obstacle the z translation
@@ -781,30 +792,9 @@ contains
       call fail('load', 'top_pressure', 'has no effect with &boundary top_dirichlet = .true. (the prescribed '// &
                 'displacement holds the top face): set top_dirichlet = .false. or drop top_pressure', &
                 reals([p%load%top_pressure])//', top_dirichlet = T')
-    call p%obstacle%check(variable, rule, got)
-    if (len(variable) > 0) call fail('obstacle', variable, rule, got)
     if (p%obstacle%shape /= 'none' .and. p%obstacle%gap < -max_penetration*p%mesh%lengths(3)) &
       call fail('obstacle', 'gap', 'the obstacle must not start deeper inside the body than 0.1 times '// &
                 'its height &mesh lengths(3)', reals([p%obstacle%gap]))
-    ! &solver: each component checks its own variables
-    associate (s => p%solver)
-      call s%smalbe%check(variable, rule, got)
-      if (len(variable) > 0) call fail('solver', variable, rule, got)
-      call s%dual%check(variable, rule, got)
-      if (len(variable) > 0) call fail('solver', variable, rule, got)
-      call s%f_action%check(variable, rule, got)
-      if (len(variable) > 0) call fail('solver', variable, rule, got)
-      call s%coarse%check(variable, rule, got)
-      if (len(variable) > 0) call fail('solver', variable, rule, got)
-      call s%local%check(variable, rule, got)
-      if (len(variable) > 0) call fail('solver', variable, rule, got)
-      call s%scaling%check(variable, rule, got)
-      if (len(variable) > 0) call fail('solver', variable, rule, got)
-      call s%preconditioner%check(variable, rule, got)
-      if (len(variable) > 0) call fail('solver', variable, rule, got)
-    end associate
-    call p%history%check(variable, rule, got)
-    if (len(variable) > 0) call fail('history', variable, rule, got)
     if (status == 0) then
       associate (h => p%history)
         step_gaps = [(h%gap(k, p%obstacle%gap), k = 1, h%nsteps)]
@@ -815,10 +805,6 @@ contains
                     'its height &mesh lengths(3) at any step', reals([minval(step_gaps)]))
       end associate
     end if
-    call p%reconstruction%check(variable, rule, got)
-    if (len(variable) > 0) call fail('reconstruction', variable, rule, got)
-    call p%output%check(variable, rule, got)
-    if (len(variable) > 0) call fail('output', variable, rule, got)
 
   contains
 
@@ -826,10 +812,9 @@ contains
       character(len=*), intent(in) :: group, variable, rule, got
       if (status /= 0) return
       status = 1
-      msg = 'file '//trim(p%file)//', group &'//group//', variable '//variable//': '//rule// &
-            ' (got '//trim(got)//')'
+      msg = refusal(p, group, variable, rule, got)
     end subroutine fail
-  end subroutine check_params
+  end subroutine check_across_groups
 
   !> Settings that are valid but probably not what was meant: each a sentence
   !> naming the group and the variable (the log and report.json's `warnings`).

@@ -3,16 +3,19 @@
 !> ranges and namelist variables; used by the run and its report.
 module output_settings
   use kinds, only: name_len, path_len
+  use settings_base, only: settings_t, refuse
   implicit none
   private
 
-  type, public :: output_settings_t
+  type, extends(settings_t), public :: output_settings_t
     character(len=path_len) :: directory = 'output'  !< where results go
     character(len=name_len) :: run_name = 'cube'  !< run name, file prefix
     logical :: write_hdf5 = .true.  !< HDF5 + XDMF fields
     logical :: write_report = .true.  !< report.json
   contains
     procedure :: check => output_settings_check
+    procedure :: group => output_settings_group
+    procedure :: variables => output_settings_variables
     procedure :: read_namelist => output_settings_read
     procedure :: write_namelist => output_settings_write
   end type output_settings_t
@@ -28,19 +31,27 @@ contains
     rule = ''
     got = ''
     if (len_trim(self%directory) == 0) then
-      call bad('directory', 'must not be empty', "''")
+      call refuse('directory', 'must not be empty', "''", variable, rule, got)
     else if (len_trim(self%run_name) == 0 .or. verify(trim(self%run_name), &
              'abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-.') /= 0) then
-      call bad('run_name', 'must be a non-empty word of letters, digits, _ - .', self%run_name)
+      call refuse('run_name', 'must be a non-empty word of letters, digits, _ - .', self%run_name, &
+                   variable, rule, got)
     end if
-  contains
-    subroutine bad(name, text, value)
-      character(len=*), intent(in) :: name, text, value
-      variable = name
-      rule = text
-      got = trim(value)
-    end subroutine bad
   end subroutine output_settings_check
+
+  !> The namelist group of these variables.
+  function output_settings_group(self) result(name)
+    class(output_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'output'
+  end function output_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine output_settings_variables(self, names)
+    class(output_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'directory', 'run_name', 'write_hdf5', 'write_report']
+  end subroutine output_settings_variables
 
   !> Read this component's variables from the group text `group`
   !> ('&output ... /').

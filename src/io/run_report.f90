@@ -54,7 +54,6 @@ contains
     character(len=*), intent(in), optional :: history
     type(json_writer_t) :: js
     type(feti_t), pointer :: op
-    type(coarse_problem_t), pointer :: cp
     type(feti_sizes_t) :: n
     character(len=:), allocatable :: memory
     integer(i8) :: f_bytes
@@ -109,7 +108,23 @@ contains
                       sol%kkt%feasibility, sol%kkt%dual_feasibility, sol%kkt%complementarity])
     call js%add('passed', sol%kkt%worst() <= reconstruction%kkt_tol)
     call js%end_object()
-    call add_reconstruction(js, reconstruction, sol, stats)
+    call js%begin_object('reconstruction')
+    call js%add('method', trim(reconstruction%method))
+    if (sol%alpha_difference >= 0) then
+      call js%add('alpha_difference', sol%alpha_difference)
+    else
+      call js%add_null('alpha_difference')
+    end if
+    call js%begin_object('new')
+    call add_stat_max('seconds', 'rec new')
+    call js%end_object()
+    call js%begin_object('standard')
+    call add_stat_max('seconds', 'rec standard')
+    call js%add_each([character(len=16) :: 'assembly', 'factorization', 'solve'], &
+                     [sol%standard_cost%assembly, sol%standard_cost%factorization, sol%standard_cost%solve])
+    call js%add('active_contact_rows', sol%standard_cost%active_rows)
+    call js%end_object()
+    call js%end_object()
     call js%add_raw('timings', timings_json(stats))
     call js%begin_object('contact')
     call js%add_each([character(len=16) :: 'total_force', 'max_pressure'], [contact%total_force, contact%max_pressure])
@@ -118,12 +133,54 @@ contains
     call js%end_object()
     call js%add_raw('memory', memory)
     if (present(history)) call js%add_raw('history', history)
-    cp => op%coarse_factor()
-    call add_coarse(js, cp)
+    call add_coarse(js, op)
     associate (b => blas_in_use())                 ! set up by the main program
       call js%add_raw('blas', blas_json(trim(b%library), trim(b%path), b%threads, trim(b%source), b%settable, &
                                          trim(b%core), trim(b%core_before)))
     end associate
+    call add_performance(js, op, f_bytes, flops, f_flops, f_seconds, seconds)
+    call js%end_object()
+    call js%write_file(trim(output%directory)//'/report.json', op%comm())
+
+  contains
+
+    !> The max over ranks of timer `name` (the time the run waited for it),
+    !> null if it never ran.
+    subroutine add_stat_max(key, name)
+      character(len=*), intent(in) :: key, name
+      real(dp) :: t
+      t = stat_max(stats, name, -1.0_dp)
+      if (t >= 0) then
+        call js%add(key, t)
+      else
+        call js%add_null(key)
+      end if
+    end subroutine add_stat_max
+  end subroutine write_run_report
+
+  !> report.json's `coarse`: the coarse factorization of the run.
+  subroutine add_coarse(js, op)
+    type(json_writer_t), intent(inout) :: js
+    type(feti_t), intent(inout), target :: op
+    type(coarse_problem_t), pointer :: cp
+    cp => op%coarse_factor()
+    call js%begin_object('coarse')
+    call js%add_each([character(len=32) :: 'ranks_per_group', 'groups', 'factor_entries', &
+                      'factor_entries_effective', 'mumps_memory_mb_max_rank', 'mumps_memory_mb_group'], &
+                     [int(cp%ranks_per_group(), i8), int(cp%groups(), i8), cp%factor_entries(), &
+                      cp%factor_entries_effective(), cp%mumps_memory_mb()])
+    call js%add('factorization_seconds', cp%factorization_seconds())
+    call js%add('dense', cp%is_dense())
+    call js%end_object()
+  end subroutine add_coarse
+
+  !> report.json's `performance`: the F action's bytes, flops and time
+  !> (sums over the ranks), the variants the run resolved, the solve's times.
+  subroutine add_performance(js, op, f_bytes, flops, f_flops, f_seconds, seconds)
+    type(json_writer_t), intent(inout) :: js
+    type(feti_t), intent(inout) :: op
+    integer(i8), intent(in) :: f_bytes
+    real(dp), intent(in) :: flops(2), f_flops, f_seconds, seconds(3)
     call js%begin_object('performance')
     call js%add('f_bytes_per_action_sum', f_bytes)
     call js%add('f_action', trim(merge('explicit', 'implicit', op%f_explicit())))
@@ -140,64 +197,7 @@ contains
                      [f_seconds, real(f_bytes, dp)/max(f_seconds, tiny(1.0_dp)), seconds(1), seconds(2), seconds(3), &
                       seconds(3)/max(seconds(1), tiny(1.0_dp))])
     call js%end_object()
-    call js%end_object()
-    call js%write_file(trim(output%directory)//'/report.json', op%comm())
-  end subroutine write_run_report
-
-  !> report.json's `reconstruction`: the method, alpha_difference, the new
-  !> and the standard formula's seconds and the standard one's costs.
-  subroutine add_reconstruction(js, reconstruction, sol, stats)
-    type(json_writer_t), intent(inout) :: js
-    type(reconstruction_settings_t), intent(in) :: reconstruction
-    type(dual_solution_t), intent(in) :: sol
-    type(timer_stat_t), intent(in) :: stats(:)
-    call js%begin_object('reconstruction')
-    call js%add('method', trim(reconstruction%method))
-    if (sol%alpha_difference >= 0) then
-      call js%add('alpha_difference', sol%alpha_difference)
-    else
-      call js%add_null('alpha_difference')
-    end if
-    call js%begin_object('new')
-    call add_stat_max(js, stats, 'seconds', 'rec new')
-    call js%end_object()
-    call js%begin_object('standard')
-    call add_stat_max(js, stats, 'seconds', 'rec standard')
-    call js%add_each([character(len=16) :: 'assembly', 'factorization', 'solve'], &
-                     [sol%standard_cost%assembly, sol%standard_cost%factorization, sol%standard_cost%solve])
-    call js%add('active_contact_rows', sol%standard_cost%active_rows)
-    call js%end_object()
-    call js%end_object()
-  end subroutine add_reconstruction
-
-  !> report.json's `coarse`: the groups and the factor of G G^T.
-  subroutine add_coarse(js, cp)
-    type(json_writer_t), intent(inout) :: js
-    type(coarse_problem_t), intent(inout) :: cp
-    call js%begin_object('coarse')
-    call js%add_each([character(len=32) :: 'ranks_per_group', 'groups', 'factor_entries', &
-                      'factor_entries_effective', 'mumps_memory_mb_max_rank', 'mumps_memory_mb_group'], &
-                     [int(cp%ranks_per_group(), i8), int(cp%groups(), i8), cp%factor_entries(), &
-                      cp%factor_entries_effective(), cp%mumps_memory_mb()])
-    call js%add('factorization_seconds', cp%factorization_seconds())
-    call js%add('dense', cp%is_dense())
-    call js%end_object()
-  end subroutine add_coarse
-
-  !> The max over ranks of timer `name` (the time the run waited for it),
-  !> null if it never ran.
-  subroutine add_stat_max(js, stats, key, name)
-    type(json_writer_t), intent(inout) :: js
-    type(timer_stat_t), intent(in) :: stats(:)
-    character(len=*), intent(in) :: key, name
-    real(dp) :: t
-    t = stat_max(stats, name, -1.0_dp)
-    if (t >= 0) then
-      call js%add(key, t)
-    else
-      call js%add_null(key)
-    end if
-  end subroutine add_stat_max
+  end subroutine add_performance
 
   !> Where the output is and how to look at it (a user's first question), with
   !> absolute paths: the hints work from any folder (the plotting tool of the

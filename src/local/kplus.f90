@@ -214,19 +214,18 @@ contains
     real(dp), intent(out) :: ratio
     logical, intent(in), optional :: allowed(:)
     logical, allocatable :: ok(:)
-    real(dp), allocatable :: mindist(:)
-    allocate (ok(sub%nnodes), mindist(sub%nnodes))
+    allocate (ok(sub%nnodes))
     ok = .true.
     if (present(allowed)) then
       if (size(allowed) /= sub%nnodes) call fatal_error('kplus: the allowed fixing nodes need one flag per node')
       if (any(allowed)) then
         ok = allowed
-        call choose_among(nodes, ratio)
+        call choose_among(sub, ok, nodes, ratio)
         if (ratio >= gram_ratio_min) return
       end if
       ok = .true.
     end if
-    call choose_among(nodes, ratio)
+    call choose_among(sub, ok, nodes, ratio)
     if (ratio < gram_ratio_min) then
       block
         character(len=160) :: msg
@@ -235,118 +234,115 @@ contains
         call fatal_error(trim(msg))
       end block
     end if
+  end subroutine choose_fixing_nodes
 
-  contains
+  !> choose_fixing_nodes's rule among the nodes with ok(node) (at least one).
+  subroutine choose_among(sub, ok, nodes, ratio)
+    type(subdomain_t), intent(in) :: sub
+    logical, intent(in) :: ok(:)
+    integer(ip), allocatable, intent(out) :: nodes(:)
+    real(dp), intent(out) :: ratio
+    real(dp), allocatable :: mindist(:)
+    integer(ip) :: chosen(max_fixing_nodes), nf, a, best, limit
+    real(dp) :: c(3), normal(3), score, best_score, diameter
 
-    !> The rule above among the nodes with ok(node) (at least one).
-    subroutine choose_among(nodes, ratio)
-      integer(ip), allocatable, intent(out) :: nodes(:)
-      real(dp), intent(out) :: ratio
-      integer(ip) :: chosen(max_fixing_nodes), nf, a, best, limit
-      real(dp) :: c(3), normal(3), score, best_score, diameter
-
-      associate (xyz => sub%coords, nn => sub%nnodes)
-        limit = min(max_fixing_nodes, count(ok, kind=ip))
-        if (all(ok)) then
-          c = sum(xyz, dim=2)/nn
-        else
-          c = 0
-          do a = 1, nn
-            if (ok(a)) c = c + xyz(:, a)
-          end do
-          c = c/count(ok)
+    allocate (mindist(sub%nnodes))
+    associate (xyz => sub%coords, nn => sub%nnodes)
+      limit = min(max_fixing_nodes, count(ok, kind=ip))
+      if (all(ok)) then
+        c = sum(xyz, dim=2)/nn
+      else
+        c = 0
+        do a = 1, nn
+          if (ok(a)) c = c + xyz(:, a)
+        end do
+        c = c/count(ok)
+      end if
+      chosen(1) = farthest_from(c)
+      chosen(2) = farthest_from(xyz(:, chosen(1)))
+      nf = 2
+      diameter = norm2(xyz(:, chosen(2)) - xyz(:, chosen(1)))
+      ! largest triangle with the first two
+      best = 0
+      best_score = 0
+      do a = 1, nn
+        if (.not. ok(a)) cycle
+        score = norm2(cross(xyz(:, a) - xyz(:, chosen(1)), xyz(:, chosen(2)) - xyz(:, chosen(1))))
+        if (score > best_score) then
+          best_score = score
+          best = a
         end if
-        chosen(1) = farthest_from(sub, ok, c)
-        chosen(2) = farthest_from(sub, ok, xyz(:, chosen(1)))
-        nf = 2
-        diameter = norm2(xyz(:, chosen(2)) - xyz(:, chosen(1)))
-        ! largest triangle with the first two
+      end do
+      if (best > 0 .and. best_score > 1.0e-8_dp*diameter**2) then
+        nf = nf + 1
+        chosen(nf) = best
+        ! farthest from the plane of the three
+        normal = cross(xyz(:, chosen(2)) - xyz(:, chosen(1)), xyz(:, chosen(3)) - xyz(:, chosen(1)))
+        normal = normal/norm2(normal)
         best = 0
         best_score = 0
         do a = 1, nn
           if (.not. ok(a)) cycle
-          score = norm2(cross(xyz(:, a) - xyz(:, chosen(1)), xyz(:, chosen(2)) - xyz(:, chosen(1))))
+          score = abs(dot_product(xyz(:, a) - xyz(:, chosen(1)), normal))
           if (score > best_score) then
             best_score = score
             best = a
           end if
         end do
-        if (best > 0 .and. best_score > 1.0e-8_dp*diameter**2) then
+        if (best > 0 .and. best_score > 1.0e-8_dp*diameter .and. nf < limit) then
           nf = nf + 1
           chosen(nf) = best
-          ! farthest from the plane of the three
-          normal = cross(xyz(:, chosen(2)) - xyz(:, chosen(1)), xyz(:, chosen(3)) - xyz(:, chosen(1)))
-          normal = normal/norm2(normal)
-          best = 0
-          best_score = 0
-          do a = 1, nn
-            if (.not. ok(a)) cycle
-            score = abs(dot_product(xyz(:, a) - xyz(:, chosen(1)), normal))
-            if (score > best_score) then
-              best_score = score
-              best = a
-            end if
-          end do
-          if (best > 0 .and. best_score > 1.0e-8_dp*diameter .and. nf < limit) then
-            nf = nf + 1
-            chosen(nf) = best
-          end if
         end if
-
-        ! more nodes while R_F^T R_F is poorly conditioned: farthest-point sampling
-        do a = 1, nn
-          mindist(a) = merge(huge(1.0_dp), -1.0_dp, ok(a))
-        end do
-        do a = 1, nf
-          call update_mindist(sub, mindist, chosen(a))
-        end do
-        ratio = gram_ratio_of(sub, chosen(1:nf))
-        do while (ratio < gram_ratio_wanted .and. nf < limit)
-          best = maxloc(mindist, dim=1)
-          if (mindist(best) <= 0) exit
-          nf = nf + 1
-          chosen(nf) = best
-          call update_mindist(sub, mindist, best)
-          ratio = gram_ratio_of(sub, chosen(1:nf))
-        end do
-        nodes = chosen(1:nf)
-      end associate
-    end subroutine choose_among
-
-  end subroutine choose_fixing_nodes
-
-  !> The node with ok(node) farthest from the point p (the first of equals).
-  integer(ip) function farthest_from(sub, ok, p)
-    type(subdomain_t), intent(in) :: sub
-    logical, intent(in) :: ok(:)
-    real(dp), intent(in) :: p(3)
-    integer(ip) :: b
-    real(dp) :: d, dmax
-    farthest_from = 1
-    dmax = -1
-    do b = 1, sub%nnodes
-      if (.not. ok(b)) cycle
-      d = sum((sub%coords(:, b) - p)**2)
-      if (d > dmax) then
-        dmax = d
-        farthest_from = b
       end if
-    end do
-  end function farthest_from
 
-  !> mindist(b) <- min(mindist(b), |x_b - x_node|) where mindist(b) >= 0.
-  subroutine update_mindist(sub, mindist, node)
-    type(subdomain_t), intent(in) :: sub
-    real(dp), intent(inout) :: mindist(:)
-    integer(ip), intent(in) :: node
-    integer(ip) :: b
-    real(dp) :: x(3)
-    x = sub%coords(:, node)
-    do b = 1, sub%nnodes
-      if (mindist(b) < 0) cycle
-      mindist(b) = min(mindist(b), norm2(sub%coords(:, b) - x))
-    end do
-  end subroutine update_mindist
+      ! more nodes while R_F^T R_F is poorly conditioned: farthest-point sampling
+      do a = 1, nn
+        mindist(a) = merge(huge(1.0_dp), -1.0_dp, ok(a))
+      end do
+      do a = 1, nf
+        call update_mindist(chosen(a))
+      end do
+      ratio = gram_ratio_of(sub, chosen(1:nf))
+      do while (ratio < gram_ratio_wanted .and. nf < limit)
+        best = maxloc(mindist, dim=1)
+        if (mindist(best) <= 0) exit
+        nf = nf + 1
+        chosen(nf) = best
+        call update_mindist(best)
+        ratio = gram_ratio_of(sub, chosen(1:nf))
+      end do
+      nodes = chosen(1:nf)
+    end associate
+
+  contains
+
+    integer(ip) function farthest_from(p)
+      real(dp), intent(in) :: p(3)
+      integer(ip) :: b
+      real(dp) :: d, dmax
+      farthest_from = 1
+      dmax = -1
+      do b = 1, sub%nnodes
+        if (.not. ok(b)) cycle
+        d = sum((sub%coords(:, b) - p)**2)
+        if (d > dmax) then
+          dmax = d
+          farthest_from = b
+        end if
+      end do
+    end function farthest_from
+
+    subroutine update_mindist(node)
+      integer(ip), intent(in) :: node
+      integer(ip) :: b
+      real(dp) :: x(3)
+      x = sub%coords(:, node)
+      do b = 1, sub%nnodes
+        if (mindist(b) < 0) cycle
+        mindist(b) = min(mindist(b), norm2(sub%coords(:, b) - x))
+      end do
+    end subroutine update_mindist
+  end subroutine choose_among
 
   pure function cross(u, v) result(w)
     real(dp), intent(in) :: u(3), v(3)

@@ -212,7 +212,7 @@ contains
       this%schur_ok(s) = all(is_d(fdofs))
       this%fptr(s + 1) = this%fptr(s)
       this%fboff(s + 1) = this%fboff(s)
-      if (this%schur_ok(s)) call append_fixing(pos(fdofs), fblk, s)
+      if (this%schur_ok(s)) call append_fixing(this, pos(fdofs), fblk, s)
       ! K_reg, dense, in the order (I, D): its Cholesky factor is then
       ! [U_I W; 0 U_S] (one dpotrf for all three blocks)
       do k = 1, n
@@ -255,7 +255,7 @@ contains
       integer(i8) :: nz, k0
       k0 = this%kptr(row0 + 1)
       nz = count(kd(1:ni, ni + 1:ni + nd) /= 0, kind=i8)
-      if (k0 + nz > size(this%kcol, kind=i8)) call grow_kid(this, max(k0 + nz, 2*size(this%kcol, kind=i8)))
+      if (k0 + nz > size(this%kcol, kind=i8)) call grow_kid(max(k0 + nz, 2*size(this%kcol, kind=i8)))
       nz = k0
       do r = 1, ni
         do c = 1, nd
@@ -268,46 +268,46 @@ contains
       end do
     end subroutine append_kid
 
-    !> The fixing block of block s on its touched positions, appended to
-    !> fpos/fblock (grown by doubling: one append per subdomain).
-    subroutine append_fixing(fp, blk, s)
-      integer(ip), intent(in) :: fp(:), s
-      real(dp), intent(in) :: blk(:, :)
-      integer(ip), allocatable :: tp(:)
-      real(dp), allocatable :: tb(:)
-      integer(ip) :: nf
-      integer(i8) :: nb
-      nf = size(fp, kind=ip)
-      nb = int(nf, i8)*nf
-      if (this%fptr(s) + nf > size(this%fpos)) then
-        allocate (tp(max(this%fptr(s) + nf, 2*size(this%fpos, kind=ip))))
-        tp(1:this%fptr(s)) = this%fpos(1:this%fptr(s))
-        call move_alloc(tp, this%fpos)
-      end if
-      if (this%fboff(s) + nb > size(this%fblock, kind=i8)) then
-        allocate (tb(max(this%fboff(s) + nb, 2*size(this%fblock, kind=i8))))
-        tb(1:this%fboff(s)) = this%fblock(1:this%fboff(s))
-        call move_alloc(tb, this%fblock)
-      end if
-      this%fpos(this%fptr(s) + 1:this%fptr(s) + nf) = fp
-      this%fblock(this%fboff(s) + 1:this%fboff(s) + nb) = reshape(blk, [nb])
-      this%fptr(s + 1) = this%fptr(s) + nf
-      this%fboff(s + 1) = this%fboff(s) + nb
-    end subroutine append_fixing
+
+    subroutine grow_kid(cap)
+      integer(i8), intent(in) :: cap
+      integer(ip), allocatable :: tc(:)
+      real(dp), allocatable :: tv(:)
+      allocate (tc(cap), tv(cap))
+      tc(1:size(this%kcol)) = this%kcol
+      tv(1:size(this%kval)) = this%kval
+      call move_alloc(tc, this%kcol)
+      call move_alloc(tv, this%kval)
+    end subroutine grow_kid
   end subroutine init_split
 
-  !> kcol and kval grown to `cap` entries (their contents kept).
-  subroutine grow_kid(this, cap)
+  !> The fixing block of block s on its touched positions, appended to
+  !> fpos/fblock (grown by doubling: one append per subdomain).
+  subroutine append_fixing(this, fp, blk, s)
     class(kplus_dense_t), intent(inout) :: this
-    integer(i8), intent(in) :: cap
-    integer(ip), allocatable :: tc(:)
-    real(dp), allocatable :: tv(:)
-    allocate (tc(cap), tv(cap))
-    tc(1:size(this%kcol)) = this%kcol
-    tv(1:size(this%kval)) = this%kval
-    call move_alloc(tc, this%kcol)
-    call move_alloc(tv, this%kval)
-  end subroutine grow_kid
+    integer(ip), intent(in) :: fp(:), s
+    real(dp), intent(in) :: blk(:, :)
+    integer(ip), allocatable :: tp(:)
+    real(dp), allocatable :: tb(:)
+    integer(ip) :: nf
+    integer(i8) :: nb
+    nf = size(fp, kind=ip)
+    nb = int(nf, i8)*nf
+    if (this%fptr(s) + nf > size(this%fpos)) then
+      allocate (tp(max(this%fptr(s) + nf, 2*size(this%fpos, kind=ip))))
+      tp(1:this%fptr(s)) = this%fpos(1:this%fptr(s))
+      call move_alloc(tp, this%fpos)
+    end if
+    if (this%fboff(s) + nb > size(this%fblock, kind=i8)) then
+      allocate (tb(max(this%fboff(s) + nb, 2*size(this%fblock, kind=i8))))
+      tb(1:this%fboff(s)) = this%fblock(1:this%fboff(s))
+      call move_alloc(tb, this%fblock)
+    end if
+    this%fpos(this%fptr(s) + 1:this%fptr(s) + nf) = fp
+    this%fblock(this%fboff(s) + 1:this%fboff(s) + nb) = reshape(blk, [nb])
+    this%fptr(s + 1) = this%fptr(s) + nf
+    this%fboff(s + 1) = this%fboff(s) + nb
+  end subroutine append_fixing
 
   !> x <- K^+ x for the concatenated vector of all blocks.
   subroutine solve(this, x)

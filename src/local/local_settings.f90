@@ -5,6 +5,7 @@
 module local_settings
   use kinds, only: dp, i8, name_len
   use text, only: lower_case, reals_text
+  use settings_base, only: settings_t, refuse
   implicit none
   private
 
@@ -15,7 +16,7 @@ module local_settings
   !> local_solver = 'auto': the dense split K^+ up to this many dofs in the largest subdomain
   integer(i8), parameter, public :: dense_max_dofs = 500
 
-  type, public :: local_settings_t
+  type, extends(settings_t), public :: local_settings_t
     character(len=name_len) :: local_ordering = 'auto'  !< 'auto' | 'metis' | 'amd' (local_ordering_for)
     character(len=name_len) :: local_solver = 'auto'  !< 'auto' | 'dense' | 'block' | 'subdomain' (local_solver_for)
     !> 'auto': one K^+ (and one explicit S^) per class of congruent subdomains
@@ -23,6 +24,8 @@ module local_settings
     real(dp) :: regularization = 1  !< rho_f relative to the mean diagonal of K
   contains
     procedure :: check => local_settings_check
+    procedure :: group => local_settings_group
+    procedure :: variables => local_settings_variables
     procedure :: read_namelist => local_settings_read
     procedure :: write_namelist => local_settings_write
   end type local_settings_t
@@ -38,22 +41,32 @@ contains
     rule = ''
     got = ''
     if (.not. any(self%local_ordering == [character(len=8) :: 'auto', 'amd', 'metis'])) then
-      call bad('local_ordering', "must be 'auto', 'amd' or 'metis'", self%local_ordering)
+      call refuse('local_ordering', "must be 'auto', 'amd' or 'metis'", self%local_ordering, &
+                   variable, rule, got)
     else if (.not. any(self%local_solver == [character(len=10) :: 'auto', 'dense', 'block', 'subdomain'])) then
-      call bad('local_solver', "must be 'auto', 'dense', 'block' or 'subdomain'", self%local_solver)
+      call refuse('local_solver', "must be 'auto', 'dense', 'block' or 'subdomain'", self%local_solver, &
+                   variable, rule, got)
     else if (.not. any(self%share_subdomains == [character(len=10) :: 'auto', 'none'])) then
-      call bad('share_subdomains', "must be 'auto' or 'none'", self%share_subdomains)
+      call refuse('share_subdomains', "must be 'auto' or 'none'", self%share_subdomains, variable, rule, got)
     else if (self%regularization <= 0) then
-      call bad('regularization', 'must be > 0', reals_text([self%regularization]))
+      call refuse('regularization', 'must be > 0', reals_text([self%regularization]), variable, rule, got)
     end if
-  contains
-    subroutine bad(name, text, value)
-      character(len=*), intent(in) :: name, text, value
-      variable = name
-      rule = text
-      got = trim(value)
-    end subroutine bad
   end subroutine local_settings_check
+
+  !> The namelist group of these variables.
+  function local_settings_group(self) result(name)
+    class(local_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'solver'
+  end function local_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine local_settings_variables(self, names)
+    class(local_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'local_ordering', 'local_solver', 'share_subdomains', &
+        'regularization']
+  end subroutine local_settings_variables
 
   !> Read this component's variables from the group text `group`
   !> ('&solver ... /'); strings lower case.

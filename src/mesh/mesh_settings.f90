@@ -7,10 +7,11 @@
 module mesh_settings
   use kinds, only: dp, ip, i8, name_len
   use text, only: lower_case
+  use settings_base, only: settings_t, refuse
   implicit none
   private
 
-  type, public :: mesh_settings_t
+  type, extends(settings_t), public :: mesh_settings_t
     integer(ip) :: nsub(3) = [2, 2, 2]        !< subdomains per direction
     integer(ip) :: nel(3) = [4, 4, 4]         !< elements per subdomain per direction
     real(dp) :: lengths(3) = [1, 1, 1]        !< box size Lx, Ly, Lz [mm]
@@ -31,6 +32,8 @@ module mesh_settings
     character(len=160) :: cluster_choice = ''
   contains
     procedure :: check => mesh_settings_check
+    procedure :: group => mesh_settings_group
+    procedure :: variables => mesh_settings_variables
     procedure :: read_namelist => mesh_settings_read
     procedure :: write_namelist => mesh_settings_write
   end type mesh_settings_t
@@ -46,40 +49,54 @@ contains
     rule = ''
     got = ''
     if (any(self%nsub < 1)) then
-      call bad('nsub', 'each entry must be >= 1', ints(self%nsub))
+      call refuse('nsub', 'each entry must be >= 1', ints(self%nsub), variable, rule, got)
     else if (any(self%nel < 1)) then
-      call bad('nel', 'each entry must be >= 1', ints(self%nel))
+      call refuse('nel', 'each entry must be >= 1', ints(self%nel), variable, rule, got)
     else if (any(self%lengths <= 0)) then
-      call bad('lengths', 'each entry must be > 0', reals(self%lengths))
+      call refuse('lengths', 'each entry must be > 0', reals(self%lengths), variable, rule, got)
     else if (self%distortion < 0 .or. self%distortion >= 0.5_dp) then
-      call bad('distortion', 'must be in [0, 0.5)', reals([self%distortion]))
+      call refuse('distortion', 'must be in [0, 0.5)', reals([self%distortion]), variable, rule, got)
     else if (.not. any(self%decomposition == [character(len=8) :: 'box', 'metis'])) then
-      call bad('decomposition', "must be 'box' or 'metis'", self%decomposition)
+      call refuse('decomposition', "must be 'box' or 'metis'", self%decomposition, variable, rule, got)
     else if (.not. any(self%mapping == [character(len=8) :: 'block', 'metis'])) then
-      call bad('mapping', "must be 'block' or 'metis'", self%mapping)
+      call refuse('mapping', "must be 'block' or 'metis'", self%mapping, variable, rule, got)
     else if (.not. (all(self%cluster == 0) .or. all(self%cluster >= 1))) then
-      call bad('cluster', 'each entry must be >= 1, or all three 0 (automatic choice)', ints(self%cluster))
+      call refuse('cluster', 'each entry must be >= 1, or all three 0 (automatic choice)', ints(self%cluster), &
+                   variable, rule, got)
     else if (self%metis_block < 0) then
-      call bad('metis_block', 'must be 0 (automatic) or a block edge b >= 1 in elements', ints([self%metis_block]))
+      call refuse('metis_block', 'must be 0 (automatic) or a block edge b >= 1 in elements', ints([self%metis_block]), &
+                   variable, rule, got)
     else if (divides_not()) then
-      call bad('cluster', 'must divide nsub in every direction (nsub = '//ints(self%nsub)//')', ints(self%cluster))
+      call refuse('cluster', 'must divide nsub in every direction (nsub = '//ints(self%nsub)//')', ints(self%cluster), &
+                   variable, rule, got)
     else if (any(self%cluster > 1) .and. self%decomposition /= 'box') then
-      call bad('cluster', "> 1 (hybrid TFETI) needs decomposition = 'box'", ints(self%cluster))
+      call refuse('cluster', "> 1 (hybrid TFETI) needs decomposition = 'box'", ints(self%cluster), &
+                   variable, rule, got)
     else if (product(int(self%nsub, i8))*product(int(self%nel, i8)) > 2_i8**27) then
-      call bad('nsub, nel', 'give at most 2**27 elements in all', ints(self%nsub)//' x '//ints(self%nel))
+      call refuse('nsub, nel', 'give at most 2**27 elements in all', ints(self%nsub)//' x '//ints(self%nel), &
+                   variable, rule, got)
     end if
   contains
-    subroutine bad(name, text, value)
-      character(len=*), intent(in) :: name, text, value
-      variable = name
-      rule = text
-      got = trim(value)
-    end subroutine bad
     logical function divides_not()
       divides_not = .false.
       if (all(self%cluster >= 1)) divides_not = any(mod(self%nsub, self%cluster) /= 0)
     end function divides_not
   end subroutine mesh_settings_check
+
+  !> The namelist group of these variables.
+  function mesh_settings_group(self) result(name)
+    class(mesh_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'mesh'
+  end function mesh_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine mesh_settings_variables(self, names)
+    class(mesh_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'nsub', 'nel', 'lengths', 'distortion', 'distortion_seed', &
+        'decomposition', 'mapping', 'cluster', 'metis_block']
+  end subroutine mesh_settings_variables
 
   !> Read the group text `group` ('&mesh ... /'); strings lower case.
   subroutine mesh_settings_read(self, group, status, msg)

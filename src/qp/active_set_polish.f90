@@ -47,6 +47,7 @@ module active_set_polish
   use face_solve, only: face_polish_t, free_rows, face_changes
   use outer_step, only: outer_step_t, outer_state_t
   use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_Comm_rank, MPI_DOUBLE_PRECISION, MPI_IN_PLACE
+  use settings_base, only: settings_t
   implicit none
   private
 
@@ -62,7 +63,7 @@ module active_set_polish
 
   !> The settings of the polish (`&solver` variables polish_*, docs/INPUT.md):
   !> the one home of their defaults (the program's), ranges and echo.
-  type, public :: polish_settings_t
+  type, extends(settings_t), public :: polish_settings_t
     !> > 0: polish once the active set has not changed for this many outer iterations; 0: never
     integer(ip) :: window = 1
     integer(ip) :: rounds = 8                  !< face solves per polish at most
@@ -85,6 +86,8 @@ module active_set_polish
     logical :: first = .true.
   contains
     procedure :: check => polish_settings_check
+    procedure :: group => polish_settings_group
+    procedure :: variables => polish_settings_variables
     procedure :: read_namelist => polish_settings_read
     procedure :: write_namelist => polish_settings_write
   end type polish_settings_t
@@ -173,6 +176,22 @@ contains
     end if
     got = trim(adjustl(buf))
   end subroutine polish_settings_check
+
+  !> The namelist group of these variables.
+  function polish_settings_group(self) result(name)
+    class(polish_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'solver'
+  end function polish_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine polish_settings_variables(self, names)
+    class(polish_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'polish_window', 'polish_rounds', 'polish_max', &
+        'polish_release', 'polish_settle', 'polish_loose', 'polish_predict', 'polish_release_share', &
+        'polish_first']
+  end subroutine polish_settings_variables
 
   !> Read the settings' variables from the namelist group text `group`
   !> ('&solver ... /', only this component's variables).

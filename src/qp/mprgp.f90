@@ -105,6 +105,7 @@ module mprgp
                         moved_other, moved_to_argument, moved_along_argument
   use inner_solver, only: inner_solver_t, inner_stop_t
   use solver_monitor, only: step_none, step_cg, step_expansion, step_proportioning
+  use settings_base, only: settings_t
   implicit none
   private
 
@@ -112,12 +113,14 @@ module mprgp
 
   !> The settings of MPRGP (`&solver` variables gamma, alpha_scale, expansion;
   !> docs/INPUT.md): the one home of their defaults, ranges and echo.
-  type, public :: mprgp_settings_t
+  type, extends(settings_t), public :: mprgp_settings_t
     real(dp) :: gamma = 1                      !< proportioning parameter Gamma > 0
     real(dp) :: alpha_scale = 1.9_dp           !< expansion step alpha_bar = alpha_scale/||A||, in (0, 2]
     character(len=name_len) :: expansion = 'fixed'  !< 'fixed' | 'optimal'
   contains
     procedure :: check => mprgp_settings_check
+    procedure :: group => mprgp_settings_group
+    procedure :: variables => mprgp_settings_variables
     procedure :: read_namelist => mprgp_settings_read
     procedure :: write_namelist => mprgp_settings_write
   end type mprgp_settings_t
@@ -246,6 +249,20 @@ contains
     end if
     got = trim(adjustl(buf))
   end subroutine mprgp_settings_check
+
+  !> The namelist group of these variables.
+  function mprgp_settings_group(self) result(name)
+    class(mprgp_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'solver'
+  end function mprgp_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine mprgp_settings_variables(self, names)
+    class(mprgp_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'gamma', 'alpha_scale', 'expansion']
+  end subroutine mprgp_settings_variables
 
   !> Read the settings' variables from the namelist group text `group`
   !> ('&solver ... /', only this component's variables); strings lower case.

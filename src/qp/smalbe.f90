@@ -85,7 +85,7 @@ module smalbe
   use kinds, only: dp, ip, i8, name_len
   use errors, only: fatal_error
   use logger, only: log_message
-  use text, only: lower_case, counted
+  use text, only: lower_case, counted, ints_text, reals_text
   use report_sink, only: report_sink_t
   use qp_problem, only: qp_problem_t, qp_solver_t, qp_message_len, compensated_add, qp_status_converged, &
                         qp_status_max_hessian, qp_status_max_outer, qp_status_not_finite, &
@@ -96,6 +96,7 @@ module smalbe
   use outer_step, only: outer_state_t
   use face_recycle, only: face_recycle_t
   use solver_monitor, only: solver_monitor_t
+  use settings_base, only: settings_t, refuse
   implicit none
   private
 
@@ -130,7 +131,7 @@ module smalbe
 
   !> The settings of SMALBE-M (`&solver`, docs/INPUT.md; the defaults are the
   !> program's), with those of its inner solver and of the polish.
-  type, public :: smalbe_settings_t
+  type, extends(settings_t), public :: smalbe_settings_t
     real(dp) :: tol = 1.0e-6_dp                !< relative tolerance (of ||b||)
     integer(ip) :: max_outer = 200             !< cap of outer iterations
     integer(ip) :: max_hessian = 20000         !< cap of Hessian multiplications in total
@@ -156,6 +157,8 @@ module smalbe
     type(polish_settings_t) :: polish          !< the active-set polish
   contains
     procedure :: check => smalbe_settings_check
+    procedure :: group => smalbe_settings_group
+    procedure :: variables => smalbe_settings_variables
     procedure :: read_namelist => smalbe_settings_read
     procedure :: write_namelist => smalbe_settings_write
   end type smalbe_settings_t
@@ -378,57 +381,52 @@ contains
   subroutine smalbe_settings_check(self, variable, rule, got)
     class(smalbe_settings_t), intent(in) :: self
     character(len=:), allocatable, intent(out) :: variable, rule, got
-    character(len=32) :: buf
     variable = ''
     rule = ''
     got = ''
-    buf = ''
     if (.not. (self%tol > 0 .and. self%tol < 1)) then
-      call bad_real('tol', 'must be in (0, 1)', self%tol)
+      call refuse('tol', 'must be in (0, 1)', reals_text([self%tol]), variable, rule, got)
     else if (self%max_outer < 1) then
-      call bad_int('max_outer', 'must be >= 1', self%max_outer)
+      call refuse('max_outer', 'must be >= 1', ints_text([self%max_outer]), variable, rule, got)
     else if (self%max_hessian < 1) then
-      call bad_int('max_hessian', 'must be >= 1', self%max_hessian)
+      call refuse('max_hessian', 'must be >= 1', ints_text([self%max_hessian]), variable, rule, got)
     else if (.not. (self%m_scale > 0)) then
-      call bad_real('m_scale', 'must be > 0', self%m_scale)
+      call refuse('m_scale', 'must be > 0', reals_text([self%m_scale]), variable, rule, got)
     else if (.not. (self%beta > 0 .and. self%beta < 1)) then
-      call bad_real('beta', 'must be in (0, 1)', self%beta)
+      call refuse('beta', 'must be in (0, 1)', reals_text([self%beta]), variable, rule, got)
     else if (.not. (self%eta_scale > 0)) then
-      call bad_real('eta_scale', 'must be > 0', self%eta_scale)
+      call refuse('eta_scale', 'must be > 0', reals_text([self%eta_scale]), variable, rule, got)
     else if (.not. any(self%m_no_step == [character(len=9) :: 'cut', 'temporary', 'keep'])) then
-      variable = 'm_no_step'
-      rule = "must be 'cut', 'temporary' or 'keep'"
-      buf = self%m_no_step
+      call refuse('m_no_step', "must be 'cut', 'temporary' or 'keep'", self%m_no_step, variable, rule, got)
     else if (.not. (self%rho_growth >= 1)) then
-      call bad_real('rho_growth', 'must be >= 1', self%rho_growth)
+      call refuse('rho_growth', 'must be >= 1', reals_text([self%rho_growth]), variable, rule, got)
     else if (.not. (self%rho_contraction > 0 .and. self%rho_contraction < 1)) then
-      call bad_real('rho_contraction', 'must be in (0, 1)', self%rho_contraction)
+      call refuse('rho_contraction', 'must be in (0, 1)', reals_text([self%rho_contraction]), variable, rule, got)
     else if (self%rho_window < 1) then
-      call bad_int('rho_window', 'must be >= 1', self%rho_window)
+      call refuse('rho_window', 'must be >= 1', ints_text([self%rho_window]), variable, rule, got)
     else if (.not. (self%rho_stall >= 0 .and. self%rho_stall < 1)) then
-      call bad_real('rho_stall', 'must be in [0, 1) (0: off)', self%rho_stall)
+      call refuse('rho_stall', 'must be in [0, 1) (0: off)', reals_text([self%rho_stall]), variable, rule, got)
     else
       call self%inner%check(variable, rule, got)
       if (len(variable) == 0) call self%polish%check(variable, rule, got)
-      return
     end if
-    got = trim(adjustl(buf))
-  contains
-    subroutine bad_real(name, text, value)
-      character(len=*), intent(in) :: name, text
-      real(dp), intent(in) :: value
-      variable = name
-      rule = text
-      write (buf, '(g0.6)') value
-    end subroutine bad_real
-    subroutine bad_int(name, text, value)
-      character(len=*), intent(in) :: name, text
-      integer(ip), intent(in) :: value
-      variable = name
-      rule = text
-      write (buf, '(i0)') value
-    end subroutine bad_int
   end subroutine smalbe_settings_check
+
+  !> The namelist group of these variables.
+  function smalbe_settings_group(self) result(name)
+    class(smalbe_settings_t), intent(in) :: self
+    character(len=:), allocatable :: name
+    name = 'solver'
+  end function smalbe_settings_group
+
+  !> The names of the namelist variables (those of read_namelist).
+  subroutine smalbe_settings_variables(self, names)
+    class(smalbe_settings_t), intent(in) :: self
+    character(len=name_len), allocatable, intent(out) :: names(:)
+    names = [character(len=name_len) :: 'tol', 'max_outer', 'max_hessian', 'm_scale', 'beta', &
+        'eta_scale', 'm_no_step', 'rho_growth', 'rho_contraction', 'rho_window', 'rho_stall', &
+        'monitor']
+  end subroutine smalbe_settings_variables
 
   !> Read SMALBE's own variables from the namelist group text `group`
   !> ('&solver ... /', only these variables); strings lower case.

@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
-"""tools/procedure_lengths.py: a procedure of 150 lines passes and one of 151
+"""tools/procedure_lengths.py: a procedure of 120 lines passes and one of 121
 fails (also an internal one, and a host whose internal procedure makes it
-too long), then every procedure of src is at most 150 lines."""
+too long), 80 and 81 in a folder `app`, then every procedure of src is at
+most 120 lines and every one of src/app at most 80."""
 import os
 import subprocess
 import sys
@@ -30,16 +31,19 @@ def sub(name, n_inner, extra=''):
 
 
 cases = [
-    ('150 lines', module(sub('a', 147)), 0),
-    ('151 lines', module(sub('a', 148)), 1),
-    ('function of 151 lines', module('  pure integer(ip) function f(x)\n    integer :: x\n' + body(148)
-                                     + '  end function f\n'), 1),
-    ('internal procedures count in the host', module(sub('a', 100, '  contains\n' + sub('b', 60))), 1),
+    ('120 lines', 'case.f90', module(sub('a', 117)), 0),
+    ('121 lines', 'case.f90', module(sub('a', 118)), 1),
+    ('function of 121 lines', 'case.f90', module('  pure integer(ip) function f(x)\n    integer :: x\n' + body(118)
+                                                 + '  end function f\n'), 1),
+    ('internal procedures count in the host', 'case.f90', module(sub('a', 70, '  contains\n' + sub('b', 50))), 1),
+    ('80 lines in app', os.path.join('app', 'case.f90'), module(sub('a', 77)), 0),
+    ('81 lines in app', os.path.join('app', 'case.f90'), module(sub('a', 78)), 1),
 ]
 failed = 0
 with tempfile.TemporaryDirectory() as tmp:
-    for name, text, expected in cases:
-        path = os.path.join(tmp, 'case.f90')
+    os.makedirs(os.path.join(tmp, 'app'))
+    for name, file, text, expected in cases:
+        path = os.path.join(tmp, file)
         with open(path, 'w') as f:
             f.write(text)
         rc = run([path]).returncode
