@@ -45,7 +45,10 @@
 !> merged subdomains, w = 1 for every other copy), with the same formulas;
 !> B diag(1/w) B^T = I per node holds with these weights. Rows are owned by
 !> the rank of the first copy's cluster. Without clusters the merged list
-!> is the plain one and the rows are today's bit for bit.
+!> is the plain one and the rows are today's bit for bit. Clusters glued by
+!> faces (`&mesh cluster_gluing = 'faces'`) merge nothing: the rows are
+!> plain TFETI's (copies and weights w_c = E(s_c)/young of the subdomains),
+!> applied to the clusters' dofs.
 !>
 !> Every row has a canonical 64-bit key (node, component, kind, index) that
 !> does not depend on the number of ranks, and one owner: the rank of the
@@ -63,7 +66,7 @@ module constraints
   use dual_exchange, only: dual_exchange_t
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Allreduce, MPI_Exscan, MPI_SUM
   use materials, only: subdomain_material
-  use clusters, only: node_copies
+  use clusters, only: node_copies, merges_corners
   implicit none
   private
 
@@ -167,7 +170,7 @@ contains
     ! 4. Sizes.
     call count_rows(comm, rank, con)
     ! 5. Exchange pattern.
-    call build_exchange(dec, con, ghost_owner, me, sub_dec)
+    call build_exchange(dec, con, ghost_owner, me, merges_corners(settings%mesh), sub_dec)
 
   contains
 
@@ -189,7 +192,7 @@ contains
           x = subs(ls)%coords(:, a)
           call node_conditions(settings, dec, ijk, x, dirichlet, value, contact, gap)
           if (present(sub_dec)) then
-            call node_copies(sub_dec, dec, gid, reps, copies, merged, member, m)
+            call node_copies(sub_dec, dec, gid, reps, copies, merged, member, m, merges_corners(settings%mesh))
             if (m == 1 .and. .not. (any(dirichlet) .or. contact)) cycle
             if (subs(ls)%node_copy(a) == 0) then
               j = findloc(copies(1:m), s_id, 1)
@@ -197,7 +200,11 @@ contains
               j = findloc(reps(1:m), subs(ls)%node_copy(a), 1)
             end if
             owner = dec%subdomain_rank(copies(1))
-            w(1:m) = real(merged(1:m), dp)     ! uniform material (checked): w = merged subdomains
+            if (merges_corners(settings%mesh)) then
+              w(1:m) = real(merged(1:m), dp)     ! uniform material (checked): w = merged subdomains
+            else
+              call copy_weights(reps(1:m), w(1:m))   ! the subdomains' weights, as plain TFETI
+            end if
             call dec%node_subdomain_list(gid, units, nunits)
             cslot = findloc(units(1:nunits), s_id, 1)
           else
@@ -260,6 +267,16 @@ contains
     subroutine subdomain_weights()
       integer(ip) :: s
       real(dp) :: young, nu
+      if (present(sub_dec)) then       ! hybrid TFETI: the subdomains, not the clusters
+        allocate (sub_weight(sub_dec%nsubdomains))
+        sub_weight = 1
+        if (settings%scaling%scaling /= 'young') return
+        do s = 1, sub_dec%nsubdomains
+          call subdomain_material(settings%material, sub_dec, s, young, nu)
+          sub_weight(s) = young/settings%material%young
+        end do
+        return
+      end if
       allocate (sub_weight(dec%nsubdomains))
       sub_weight = 1
       if (settings%scaling%scaling /= 'young') return
@@ -452,8 +469,9 @@ contains
   !> The neighbour exchange: ghosts are received from their owners in the
   !> order of `ghost_owner`; owned gluing and contact rows are sent to every
   !> other rank holding one of their copies, in key order.
-  subroutine build_exchange(dec, con, ghost_owner, me, sub_dec)
+  subroutine build_exchange(dec, con, ghost_owner, me, merge_corners, sub_dec)
     type(decomposition_t), intent(in) :: dec
+    logical, intent(in) :: merge_corners     !< hybrid TFETI: the clusters merge their corners
     type(decomposition_t), intent(in), optional :: sub_dec
     type(constraints_t), intent(inout) :: con
     integer(ip), intent(in) :: ghost_owner(:)   ! owner of ghost i (local row n_own+i)
@@ -472,7 +490,7 @@ contains
     do i = 1, con%n_own
       if (con%kind(i) == row_dirichlet) cycle
       if (present(sub_dec)) then
-        call node_copies(sub_dec, dec, con%node(i), reps, copies, merged, member, ncopies)   ! copies: clusters
+        call node_copies(sub_dec, dec, con%node(i), reps, copies, merged, member, ncopies, merge_corners)   ! clusters
       else
         call dec%node_subdomain_list(con%node(i), copies, ncopies)
       end if

@@ -752,15 +752,16 @@ contains
     associate (m => p%mesh)
       call m%check(variable, rule, got)
       if (len(variable) > 0) call fail('mesh', variable, rule, got)
+      if (any(m%cluster > 1) .and. m%cluster_gluing == 'corners') then
+        if (p%material%variation /= 'none') call fail('mesh', 'cluster_gluing', &
+          "= 'corners' needs &material variation = 'none' (merged corners have one modulus)", m%cluster_gluing)
+        if (p%solver%preconditioner%preconditioner == 'dirichlet') call fail('mesh', 'cluster_gluing', &
+          "= 'corners' works with &solver preconditioner = 'none' or 'lumped', not 'dirichlet'", m%cluster_gluing)
+      end if
       if (any(m%cluster > 1)) then
-        if (p%material%variation /= 'none') call fail('mesh', 'cluster', &
-          "> 1 (hybrid TFETI) needs &material variation = 'none'", ints(m%cluster))
-        if (p%solver%preconditioner%preconditioner == 'dirichlet') call fail('mesh', 'cluster', &
-          "> 1 (hybrid TFETI) works with &solver preconditioner = 'none' or 'lumped', not 'dirichlet'", &
-          ints(m%cluster))
         if (p%solver%f_action%f_action == 'explicit') call fail('mesh', 'cluster', &
-          "> 1 (hybrid TFETI) works with &solver f_action = 'implicit' or 'auto' (which then stays implicit)", &
-          ints(m%cluster))
+          "> 1 (hybrid TFETI) works with &solver f_action = 'implicit' or 'auto' (explicit only for classes "// &
+          "of congruent clusters)", ints(m%cluster))
         if (p%solver%local%local_solver == 'dense') call fail('mesh', 'cluster', &
           "> 1 (hybrid TFETI) works with &solver local_solver = 'auto', 'block' or 'subdomain', not 'dense'", &
           ints(m%cluster))
