@@ -32,7 +32,7 @@ module mesh_settings
     !> not namelist variables: set by `resolve_cluster` (read_params) when
     !> `cluster` was 0,0,0: then `cluster` holds the choice, and the reason
     logical :: cluster_auto = .false.
-    character(len=160) :: cluster_choice = ''
+    character(len=240) :: cluster_choice = ''
   contains
     procedure :: check => mesh_settings_check
     procedure :: read_namelist => mesh_settings_read
