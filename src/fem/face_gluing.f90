@@ -27,9 +27,13 @@ contains
   !> box subdomain holds at least 2 x 2 nodes, not collinear). Faces in the
   !> order of (i, j), nodes in ascending global number, so congruent clusters
   !> get the same rows.
-  subroutine build_face_gluing(dec, sub)
+  subroutine build_face_gluing(dec, sub, edges)
     type(decomposition_t), intent(in) :: dec
     type(subdomain_t), intent(inout) :: sub
+    !> also 3 rows per pair sharing only an edge: the mean jump over its nodes
+    logical, intent(in), optional :: edges
+    logical :: with_edges
+    integer(ip) :: d(3), row0
     integer(i8), allocatable :: pkey(:)
     integer(ip), allocatable :: pa(:), pb(:), order(:), rows(:), cols(:)
     real(dp), allocatable :: vals(:), q(:, :), x(:, :)
@@ -38,6 +42,8 @@ contains
 
     if (.not. allocated(sub%node_copy)) call fatal_error('face_gluing: not a cluster')
     if (any(sub%node_copy == 0)) call fatal_error('face_gluing: the cluster merges its corners')
+    with_edges = .false.
+    if (present(edges)) with_edges = edges
     base = int(dec%nsubdomains, i8) + 1
     ! (pair of subdomains, node copy in i, node copy in j) for every shared node of a face pair
     allocate (pkey(8*sub%nnodes), pa(8*sub%nnodes), pb(8*sub%nnodes))
@@ -51,7 +57,8 @@ contains
       end do
       do a = first, last
         do b = a + 1, last
-          if (sum(abs(box_index(dec, sub%node_copy(a)) - box_index(dec, sub%node_copy(b)))) /= 1) cycle
+          d = abs(box_index(dec, sub%node_copy(a)) - box_index(dec, sub%node_copy(b)))
+          if (.not. (sum(d) == 1 .or. (with_edges .and. sum(d) == 2 .and. maxval(d) == 1))) cycle
           np = np + 1
           pkey(np) = int(sub%node_copy(a), i8)*base + sub%node_copy(b)
           pa(np) = a
@@ -72,6 +79,7 @@ contains
     allocate (rows(36*np), cols(36*np), vals(36*np))
     nz = 0
     f = 0
+    row0 = 0
     first = 1
     do while (first <= np)
       last = first
@@ -81,27 +89,44 @@ contains
       end do
       f = f + 1
       n = last - first + 1
-      x = sub%coords(:, pa(order(first:last)))
-      if (allocated(q)) deallocate (q)
-      allocate (q(3*n, 6))
-      call rigid_body_modes(x, sum(x, dim=2)/n, q)
-      do k = 1, n
-        do c = 1, 3
-          do r = 1, 6
-            nz = nz + 1
-            rows(nz) = 6*(f - 1) + r
-            cols(nz) = 3*(pa(order(first + k - 1)) - 1) + c
-            vals(nz) = q(3*(k - 1) + c, r)
-            nz = nz + 1
-            rows(nz) = 6*(f - 1) + r
-            cols(nz) = 3*(pb(order(first + k - 1)) - 1) + c
-            vals(nz) = -q(3*(k - 1) + c, r)
+      d = abs(box_index(dec, sub%node_copy(pa(order(first)))) - box_index(dec, sub%node_copy(pb(order(first)))))
+      if (sum(d) == 1) then
+        ! a face: its 6 rigid-body moments
+        x = sub%coords(:, pa(order(first:last)))
+        if (allocated(q)) deallocate (q)
+        allocate (q(3*n, 6))
+        call rigid_body_modes(x, sum(x, dim=2)/n, q)
+        do k = 1, n
+          do c = 1, 3
+            do r = 1, 6
+              call push(row0 + r, 3*(pa(order(first + k - 1)) - 1) + c, q(3*(k - 1) + c, r))
+              call push(row0 + r, 3*(pb(order(first + k - 1)) - 1) + c, -q(3*(k - 1) + c, r))
+            end do
           end do
         end do
-      end do
+        row0 = row0 + 6
+      else
+        ! an edge: the mean jump of each component
+        do k = 1, n
+          do c = 1, 3
+            call push(row0 + c, 3*(pa(order(first + k - 1)) - 1) + c, 1/sqrt(real(n, dp)))
+            call push(row0 + c, 3*(pb(order(first + k - 1)) - 1) + c, -1/sqrt(real(n, dp)))
+          end do
+        end do
+        row0 = row0 + 3
+      end if
       first = last + 1
     end do
-    call csr_from_coo(6*nf, sub%ndof, rows(1:nz), cols(1:nz), vals(1:nz), sub%C)
+    call csr_from_coo(row0, sub%ndof, rows(1:nz), cols(1:nz), vals(1:nz), sub%C)
+  contains
+    subroutine push(i, j, v)
+      integer(ip), intent(in) :: i, j
+      real(dp), intent(in) :: v
+      nz = nz + 1
+      rows(nz) = i
+      cols(nz) = j
+      vals(nz) = v
+    end subroutine push
   end subroutine build_face_gluing
 
   !> The box position (0-based, per direction) of subdomain `s` of `dec`.

@@ -39,6 +39,7 @@ contains
 
     call this%free()
     this%communicator = comm
+    this%young_rows = settings%scaling%scaling == 'young'
     call check_coarse_ranks()
 
     call timer_start('mesh')
@@ -186,7 +187,7 @@ contains
       if (this%hybrid) then
         call build_cluster(this%sub_dec, this%dec, this%dec%local_subdomains(ls), this%subs(ls), &
                            merge_corners=merges_corners(settings%mesh))
-        if (.not. merges_corners(settings%mesh)) call build_face_gluing(this%sub_dec, this%subs(ls))
+        if (.not. merges_corners(settings%mesh)) call build_face_gluing(this%sub_dec, this%subs(ls), edges=.true.)   ! edges: checkerboards (docs/THEORY.md)
       else
         call build_subdomain(this%dec, this%dec%local_subdomains(ls), this%subs(ls))
       end if
