@@ -402,11 +402,11 @@ def main():
     ap.add_argument('--mpiexec', default='mpirun')
     ap.add_argument('--ranks', type=int, default=2)
     ap.add_argument('--workdir', required=True)
-    ap.add_argument('--mesh', default=MESH, help="the &mesh variables (e.g. with cluster = 2, 2, 2)")
+    ap.add_argument('--mesh', default=None, help="the &mesh variables (default: %s)" % MESH)
     ap.add_argument('check', choices=['steps', 'restart', 'bad', 'signal', 'paraview', 'savings'])
     args = ap.parse_args()
-    global MESH
-    MESH = args.mesh
+    if args.mesh:
+        globals()['MESH'] = args.mesh
     os.makedirs(args.workdir, exist_ok=True)
     status = {'steps': check_steps, 'restart': check_restart, 'bad': check_bad,
               'signal': check_signal, 'paraview': check_paraview, 'savings': check_savings}[args.check](args)
