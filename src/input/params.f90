@@ -947,7 +947,7 @@ contains
       real(dp), intent(in) :: plain, best
       integer(ip), intent(in) :: t(3)
       character(len=200) :: line
-      write (line, '(a,es8.2,a,3(i0,a),es8.2,a,i0,a,i0,a,f0.2,a,i0,a)') 'plain ', plain, ' s, clusters ', t(1), 'x', &
+      write (line, '(a,es8.2,a,3(i0,a),es8.2,a,i0,a,i0,a,f4.2,a,i0,a)') 'plain ', plain, ' s, clusters ', t(1), 'x', &
         t(2), 'x', t(3), ' ', best, ' s (', product(int(p%mesh%nsub, i8)), ' subdomains, H/h = ', &
         maxval(p%mesh%nel), ', clusters if <= ', margin, ' x plain, >= ', min_subdomains, ' subdomains)'
     end function model_line
