@@ -157,7 +157,11 @@ contains
     me = rank
 
     ! 1. Records of every B entry of the local subdomains (count, then fill).
-    call subdomain_weights()
+    if (present(sub_dec)) then       ! hybrid TFETI: the subdomains' weights, not the clusters'
+      call subdomain_weights(settings, sub_dec, sub_weight)
+    else
+      call subdomain_weights(settings, dec, sub_weight)
+    end if
     nrec = 0
     call visit(.false.)
     allocate (rec(nrec))
@@ -200,11 +204,8 @@ contains
               j = findloc(reps(1:m), subs(ls)%node_copy(a), 1)
             end if
             owner = dec%subdomain_rank(copies(1))
-            if (merges_corners(settings%mesh)) then
-              w(1:m) = real(merged(1:m), dp)     ! uniform material (checked): w = merged subdomains
-            else
-              call copy_weights(reps(1:m), w(1:m))   ! the subdomains' weights, as plain TFETI
-            end if
+            w(1:m) = real(merged(1:m), dp)     ! corners (uniform material, checked): w = merged subdomains
+            if (.not. merges_corners(settings%mesh)) call copy_weights(reps(1:m), w(1:m))   ! faces: plain TFETI's
             call dec%node_subdomain_list(gid, units, nunits)
             cslot = findloc(units(1:nunits), s_id, 1)
           else
@@ -262,30 +263,6 @@ contains
       w = sub_weight(ids)
     end subroutine copy_weights
 
-    !> sub_weight(s) = E(s)/young for every subdomain with &solver scaling = 'young', else 1.
-    !> From the parameters alone: the same on every rank.
-    subroutine subdomain_weights()
-      integer(ip) :: s
-      real(dp) :: young, nu
-      if (present(sub_dec)) then       ! hybrid TFETI: the subdomains, not the clusters
-        allocate (sub_weight(sub_dec%nsubdomains))
-        sub_weight = 1
-        if (settings%scaling%scaling /= 'young') return
-        do s = 1, sub_dec%nsubdomains
-          call subdomain_material(settings%material, sub_dec, s, young, nu)
-          sub_weight(s) = young/settings%material%young
-        end do
-        return
-      end if
-      allocate (sub_weight(dec%nsubdomains))
-      sub_weight = 1
-      if (settings%scaling%scaling /= 'young') return
-      do s = 1, dec%nsubdomains
-        call subdomain_material(settings%material, dec, s, young, nu)
-        sub_weight(s) = young/settings%material%young
-      end do
-    end subroutine subdomain_weights
-
     subroutine emit(key, owner, ls, dof, node, gid, kind, slot, val, c, scale, unit)
       integer(i8), intent(in) :: key
       integer, intent(in) :: owner
@@ -295,6 +272,23 @@ contains
       if (filling) rec(nrec) = record_t(key, owner, ls, dof, node, gid, kind, slot, cslot, val, c, scale, unit)
     end subroutine emit
   end subroutine build_constraints
+
+  !> w(s) = E(s)/young for every subdomain s of `dec` with &solver scaling =
+  !> 'young', else 1. From the parameters alone: the same on every rank.
+  subroutine subdomain_weights(settings, dec, w)
+    type(feti_settings_t), intent(in) :: settings
+    type(decomposition_t), intent(in) :: dec
+    real(dp), allocatable, intent(out) :: w(:)
+    integer(ip) :: s
+    real(dp) :: young, nu
+    allocate (w(dec%nsubdomains))
+    w = 1
+    if (settings%scaling%scaling /= 'young') return
+    do s = 1, dec%nsubdomains
+      call subdomain_material(settings%material, dec, s, young, nu)
+      w(s) = young/settings%material%young
+    end do
+  end subroutine subdomain_weights
 
   !> The unique rows of the records `rec` in key order: `row_of_rec` the
   !> row of each record, `urow_first` the first record of each row (sorted
