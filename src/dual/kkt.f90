@@ -13,7 +13,10 @@
 !>                     s: every subdomain is measured against its own forces,
 !>                     not those of its neighbours, or, where they are smaller,
 !>                     against the forces a displacement U makes in it (so an
-!>                     imbalance counts by the displacement it causes);
+!>                     imbalance counts by the displacement it causes); for
+!>                     a cluster glued by faces (hybrid TFETI) the residual r
+!>                     less C^T (C C^T)^{-1} C r, the part the face moments'
+!>                     multipliers carry (K u - f + B^T lambda = -C^T mu);
 !> - dual_feasibility: ||min(lambda_I, 0)|| / ||lambda_I|| (contact forces >= 0);
 !> - complementarity:  max_i |force_i| |gap_i(u)| / (max_i |force_i| U) on the
 !>                     contact rows (force = row scale x multiplier = the sum
@@ -26,6 +29,7 @@ module kkt
   use kinds, only: dp, ip, MPI_REAL_DP
   use feti_operators, only: feti_t, local_field_t
   use subdomain, only: subdomain_t
+  use face_gluing, only: remove_gluing_forces
   use constraints, only: row_dirichlet, row_contact
   use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_IN_PLACE
   implicit none
@@ -70,7 +74,7 @@ contains
     type(kkt_residuals_t) :: res
     type(local_field_t), allocatable :: btl(:)
     type(subdomain_t), pointer :: subs(:)
-    real(dp), allocatable :: ku(:), bu(:), r(:), force(:), scale(:)
+    real(dp), allocatable :: ku(:), bu(:), r(:), force(:), scale(:), rr(:)
     integer(ip), allocatable :: kind(:)
     logical, allocatable :: contact(:)
     real(dp) :: mx(6), sm(2), e(4), umax, fmax
@@ -94,7 +98,12 @@ contains
       associate (sub => subs(ls))
         allocate (ku(sub%ndof))
         call sub%K%matvec(u(ls)%v, ku)
-        e(1) = sum((ku - sub%f + btl(ls)%v)**2)
+        ! a cluster glued by faces is in equilibrium up to its face moments' forces C^T mu
+        allocate (rr(sub%ndof))
+        rr = ku - sub%f + btl(ls)%v
+        call remove_gluing_forces(sub, rr)
+        e(1) = sum(rr**2)
+        deallocate (rr)
         ! the subdomain's own forces, and at least the forces that a
         ! displacement U makes in it (max |K_s| U): an imbalance then counts by
         ! the displacement it causes, E_s-weighted like the stopping test, and

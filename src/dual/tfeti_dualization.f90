@@ -110,9 +110,9 @@ contains
     call timer_stop('dual setup')
     if (preconditioner%preconditioner /= 'none') then
       kind = preconditioner%preconditioner
-      ! 'auto' with hybrid TFETI (&mesh cluster): no Dirichlet preconditioner
-      ! for clusters, so 'auto' is 'lumped' there
-      if (kind == 'auto' .and. this%op%hybrid_units()) kind = 'lumped'
+      ! 'auto' with clusters glued at their corners: no Dirichlet
+      ! preconditioner for them, so 'auto' is 'lumped' there
+      if (kind == 'auto' .and. this%op%hybrid_units() .and. feti%mesh%cluster_gluing == 'corners') kind = 'lumped'
       call timer_start('preconditioner setup')
       call this%dual%set_preconditioner(kind, subdomain_weights(feti, this%op), preconditioner%preconditioner_switch)
       call timer_stop('preconditioner setup')
@@ -126,8 +126,8 @@ contains
           'once the face condition estimate exceeds ', preconditioner%preconditioner_switch
         call log_message(trim(line))
       else if (kind /= preconditioner%preconditioner) then
-        call log_message("preconditioner (MPRGP in the face): lumped ('auto' with hybrid TFETI, "// &
-                         'which has no Dirichlet preconditioner)')
+        call log_message("preconditioner (MPRGP in the face): lumped ('auto' with clusters glued at "// &
+                         'their corners, which have no Dirichlet preconditioner)')
       else
         call log_message('preconditioner (MPRGP in the face): '//trim(kind))
       end if

@@ -82,7 +82,14 @@ contains
     type(decomposition_t), intent(in) :: dec
     type(subdomain_t), intent(inout) :: sub
 
-    call subdomain_material(material, dec, sub%id, sub%young, sub%poisson)
+    if (allocated(sub%elem_young)) then
+      ! a cluster of subdomains of several moduli (glued by faces): `young` is
+      ! the reference modulus, the elements carry their own
+      sub%young = material%young
+      sub%poisson = material%poisson
+    else
+      call subdomain_material(material, dec, sub%id, sub%young, sub%poisson)
+    end if
     call assemble_stiffness(sub)
     if (allocated(sub%f)) deallocate (sub%f)
     allocate (sub%f(sub%ndof))
@@ -101,7 +108,7 @@ contains
     type(subdomain_t), intent(inout) :: sub
     integer(ip), allocatable :: nptr(:), nelems(:), adjptr(:), adj(:), marker(:)
     integer(ip) :: n, e, a, b, i, j, k, m, c, nadj, first, row, base, pos, ln(8)
-    real(dp) :: ke(24, 24), x(3, 8), xrel(3, 8), xrel_prev(3, 8), same_shape
+    real(dp) :: ke(24, 24), x(3, 8), xrel(3, 8), xrel_prev(3, 8), same_shape, sc
     logical :: have_prev, reuse
 
     n = sub%nnodes
@@ -178,6 +185,9 @@ contains
         xrel_prev = xrel
         have_prev = .true.
       end if
+      ! K_e is linear in E: an element of another modulus (elem_young) scales it
+      sc = 1
+      if (allocated(sub%elem_young)) sc = sub%elem_young(e)/sub%young
       do i = 1, 8
         a = ln(i)
         do j = 1, 8
@@ -192,7 +202,7 @@ contains
           do c = 1, 3
             base = sub%K%rowptr(3*(a - 1) + c) + 3*pos
             sub%K%values(base:base + 2) = sub%K%values(base:base + 2) + &
-                                          ke(3*(i - 1) + c, 3*(j - 1) + 1:3*(j - 1) + 3)
+                                          sc*ke(3*(i - 1) + c, 3*(j - 1) + 1:3*(j - 1) + 3)
           end do
         end do
       end do
@@ -264,12 +274,14 @@ contains
     real(dp), intent(in) :: u(:)
     real(dp), intent(out) :: vm(:)
     integer(ip) :: e
-    real(dp) :: sigma(6)
+    real(dp) :: sigma(6), young
     if (size(u) < sub%ndof .or. size(vm) < sub%nelem) &
       call fatal_error('subdomain_von_mises: u or vm too short')
+    young = sub%young
     do e = 1, sub%nelem
+      if (allocated(sub%elem_young)) young = sub%elem_young(e)
       call q1_centroid_stress(sub%coords(:, sub%elem_nodes(:, e)), element_displacements(sub, e, u), &
-                              sub%young, sub%poisson, sigma)
+                              young, sub%poisson, sigma)
       vm(e) = von_mises(sigma)
     end do
   end subroutine subdomain_von_mises

@@ -45,7 +45,10 @@
 !> merged subdomains, w = 1 for every other copy), with the same formulas;
 !> B diag(1/w) B^T = I per node holds with these weights. Rows are owned by
 !> the rank of the first copy's cluster. Without clusters the merged list
-!> is the plain one and the rows are today's bit for bit.
+!> is the plain one and the rows are today's bit for bit. Clusters glued by
+!> faces (`&mesh cluster_gluing = 'faces'`) merge nothing: the rows are
+!> plain TFETI's (copies and weights w_c = E(s_c)/young of the subdomains),
+!> applied to the clusters' dofs.
 !>
 !> Every row has a canonical 64-bit key (node, component, kind, index) that
 !> does not depend on the number of ranks, and one owner: the rank of the
@@ -63,7 +66,7 @@ module constraints
   use dual_exchange, only: dual_exchange_t
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Allreduce, MPI_Exscan, MPI_SUM
   use materials, only: subdomain_material
-  use clusters, only: node_copies
+  use clusters, only: node_copies, merges_corners
   implicit none
   private
 
@@ -154,7 +157,11 @@ contains
     me = rank
 
     ! 1. Records of every B entry of the local subdomains (count, then fill).
-    sub_weight = subdomain_weights(settings, dec)
+    if (present(sub_dec)) then       ! hybrid TFETI: the subdomains' weights, not the clusters'
+      call subdomain_weights(settings, sub_dec, sub_weight)
+    else
+      call subdomain_weights(settings, dec, sub_weight)
+    end if
     nrec = 0
     call visit(.false.)
     allocate (rec(nrec))
@@ -167,7 +174,7 @@ contains
     ! 4. Sizes.
     call count_rows(comm, rank, con)
     ! 5. Exchange pattern.
-    call build_exchange(dec, con, ghost_owner, me, sub_dec)
+    call build_exchange(dec, con, ghost_owner, me, merges_corners(settings%mesh), sub_dec)
 
   contains
 
@@ -189,7 +196,7 @@ contains
           x = subs(ls)%coords(:, a)
           call node_conditions(settings, dec, ijk, x, dirichlet, value, contact, gap)
           if (present(sub_dec)) then
-            call node_copies(sub_dec, dec, gid, reps, copies, merged, member, m)
+            call node_copies(sub_dec, dec, gid, reps, copies, merged, member, m, merges_corners(settings%mesh))
             if (m == 1 .and. .not. (any(dirichlet) .or. contact)) cycle
             if (subs(ls)%node_copy(a) == 0) then
               j = findloc(copies(1:m), s_id, 1)
@@ -197,7 +204,8 @@ contains
               j = findloc(reps(1:m), subs(ls)%node_copy(a), 1)
             end if
             owner = dec%subdomain_rank(copies(1))
-            w(1:m) = real(merged(1:m), dp)     ! uniform material (checked): w = merged subdomains
+            w(1:m) = real(merged(1:m), dp)     ! corners (uniform material, checked): w = merged subdomains
+            if (.not. merges_corners(settings%mesh)) w(1:m) = sub_weight(reps(1:m))   ! faces: plain TFETI's
             call dec%node_subdomain_list(gid, units, nunits)
             cslot = findloc(units(1:nunits), s_id, 1)
           else
@@ -248,12 +256,12 @@ contains
     end subroutine emit
   end subroutine build_constraints
 
-  !> E(s)/young for every subdomain s with &solver scaling = 'young', else 1.
-  !> From the parameters alone: the same on every rank.
-  function subdomain_weights(settings, dec) result(w)
+  !> w(s) = E(s)/young for every subdomain s of `dec` with &solver scaling =
+  !> 'young', else 1. From the parameters alone: the same on every rank.
+  subroutine subdomain_weights(settings, dec, w)
     type(feti_settings_t), intent(in) :: settings
     type(decomposition_t), intent(in) :: dec
-    real(dp), allocatable :: w(:)
+    real(dp), allocatable, intent(out) :: w(:)
     integer(ip) :: s
     real(dp) :: young, nu
     allocate (w(dec%nsubdomains))
@@ -263,7 +271,7 @@ contains
       call subdomain_material(settings%material, dec, s, young, nu)
       w(s) = young/settings%material%young
     end do
-  end function subdomain_weights
+  end subroutine subdomain_weights
 
   !> The unique rows of the records `rec` in key order: `row_of_rec` the
   !> row of each record, `urow_first` the first record of each row (sorted
@@ -438,8 +446,9 @@ contains
   !> The neighbour exchange: ghosts are received from their owners in the
   !> order of `ghost_owner`; owned gluing and contact rows are sent to every
   !> other rank holding one of their copies, in key order.
-  subroutine build_exchange(dec, con, ghost_owner, me, sub_dec)
+  subroutine build_exchange(dec, con, ghost_owner, me, merge_corners, sub_dec)
     type(decomposition_t), intent(in) :: dec
+    logical, intent(in) :: merge_corners     !< hybrid TFETI: the clusters merge their corners
     type(decomposition_t), intent(in), optional :: sub_dec
     type(constraints_t), intent(inout) :: con
     integer(ip), intent(in) :: ghost_owner(:)   ! owner of ghost i (local row n_own+i)
@@ -458,7 +467,7 @@ contains
     do i = 1, con%n_own
       if (con%kind(i) == row_dirichlet) cycle
       if (present(sub_dec)) then
-        call node_copies(sub_dec, dec, con%node(i), reps, copies, merged, member, ncopies)   ! copies: clusters
+        call node_copies(sub_dec, dec, con%node(i), reps, copies, merged, member, ncopies, merge_corners)   ! clusters
       else
         call dec%node_subdomain_list(con%node(i), copies, ncopies)
       end if

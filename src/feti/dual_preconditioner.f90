@@ -70,6 +70,7 @@ module dual_preconditioner
     type(b_operator_t), pointer :: b => null()
     type(subdomain_t), pointer :: subs(:) => null()
     real(dp), allocatable :: inv_w(:)           !< (nlocal) 1/w_s
+    real(dp), allocatable :: inv_wd(:)          !< (n_concat) 1/w per dof (dof_weights), else unallocated
     real(dp), allocatable :: xall(:), yall(:)   !< work: concatenated primal vectors
     type(schur_complement_t) :: schur
     logical :: shared = .false.                 !< applied per class (class_operator)
@@ -101,7 +102,9 @@ contains
   !> outlive the preconditioner; `weights(ls)` = w_s of local subdomain ls.
   !> `classes` (optional): classes of congruent subdomains of `subs`; when
   !> they are shared (subdomain_classes_t%shared), A_s is applied per class.
-  subroutine init(this, variant, b, subs, weights, classes, dense)
+  !> `dof_weights` (optional, one per dof of the concatenated vector): w per
+  !> dof instead of per subdomain (clusters of several moduli); per unit then.
+  subroutine init(this, variant, b, subs, weights, classes, dense, dof_weights)
     class(dual_preconditioner_t), intent(inout) :: this
     character(len=*), intent(in) :: variant
     type(b_operator_t), intent(inout), target :: b
@@ -109,6 +112,7 @@ contains
     real(dp), intent(in) :: weights(:)
     type(subdomain_classes_t), intent(in), optional :: classes
     type(f_operator_t), intent(in), target, optional :: dense
+    real(dp), intent(in), optional :: dof_weights(:)
     type(constraints_t), pointer :: con
     logical, allocatable :: on_interface(:)
     integer(ip) :: ls, e, r(2)
@@ -124,14 +128,19 @@ contains
     this%inv_w = 1/weights
     allocate (this%xall(b%n_concat()), this%yall(b%n_concat()))
     call contact_scaling(this, b, size(subs, kind=ip))
-    if (present(classes)) then
+    if (present(dof_weights)) then
+      if (size(dof_weights) /= b%n_concat() .or. any(.not. dof_weights > 0)) &
+        call fatal_error('dual_preconditioner: dof_weights must be > 0, one per dof')
+      this%inv_wd = 1/dof_weights
+    end if
+    if (present(classes) .and. .not. present(dof_weights)) then
       if (classes%shared()) then
         if (variant == 'lumped') call init_shared(this, b, subs, classes)
         if (variant == 'dirichlet') call init_shared_dirichlet(this, b, subs, classes)
         return
       end if
     end if
-    if (variant == 'dirichlet' .and. present(dense)) then
+    if (variant == 'dirichlet' .and. present(dense) .and. .not. present(dof_weights)) then
       ! S_s from the dense local solver's factors: nothing to set up
       this%fop => dense
       this%inv_w2 = this%inv_w**2
@@ -306,10 +315,14 @@ contains
     end if
     this%xall = 0
     call this%b%add_transpose(this%dx, 1.0_dp, this%xall)
-    do ls = 1, size(this%subs, kind=ip)
-      r = this%b%dof_range(ls)
-      this%xall(r(1):r(2)) = this%inv_w(ls)*this%xall(r(1):r(2))
-    end do
+    if (allocated(this%inv_wd)) then
+      this%xall = this%inv_wd*this%xall
+    else
+      do ls = 1, size(this%subs, kind=ip)
+        r = this%b%dof_range(ls)
+        this%xall(r(1):r(2)) = this%inv_w(ls)*this%xall(r(1):r(2))
+      end do
+    end if
     if (this%kind_name == 'dirichlet') then
       call this%schur%apply(this%subs, this%xall)
       this%yall = this%xall
@@ -319,10 +332,14 @@ contains
         call this%subs(ls)%K%matvec(this%xall(r(1):r(2)), this%yall(r(1):r(2)))
       end do
     end if
-    do ls = 1, size(this%subs, kind=ip)
-      r = this%b%dof_range(ls)
-      this%yall(r(1):r(2)) = this%inv_w(ls)*this%yall(r(1):r(2))
-    end do
+    if (allocated(this%inv_wd)) then
+      this%yall = this%inv_wd*this%yall
+    else
+      do ls = 1, size(this%subs, kind=ip)
+        r = this%b%dof_range(ls)
+        this%yall(r(1):r(2)) = this%inv_w(ls)*this%yall(r(1):r(2))
+      end do
+    end if
     call this%b%apply_concat(this%yall, this%dx)
     y(1:size(this%d)) = this%d*this%dx
     this%applications = this%applications + 1
@@ -411,6 +428,7 @@ contains
     this%shared_bytes = 0
     this%setup_flops = 0
     if (allocated(this%inv_w)) deallocate (this%inv_w)
+    if (allocated(this%inv_wd)) deallocate (this%inv_wd)
     if (allocated(this%xall)) deallocate (this%xall, this%yall)
     if (allocated(this%d)) deallocate (this%d, this%dx)
     if (allocated(this%inv_w2)) deallocate (this%inv_w2)

@@ -36,7 +36,7 @@ module f_operator
   use class_operator, only: class_operator_t, sandwich
   use b_operator, only: b_operator_t
   use sorting, only: sort_unique
-  use kplus, only: regularized_system
+  use kplus, only: regularized_system, kplus_t
   use schur_complement, only: dense_schur
   implicit none
   private
@@ -644,6 +644,17 @@ contains
       call this%shared_op%class_dofs(b, c, dofs)
       n = size(dofs, kind=ip)
       if (n == 0) cycle
+      if (subs(r)%C%nrows > 0) then
+        ! a cluster glued by faces: K^+ is a constrained solve (singular on
+        ! the touched dofs, which hold the gluing rows), so its columns come
+        ! from solves with the class's factors
+        select type (k => this%kinv)
+        type is (kplus_shared_t)
+          call touched_columns(k%kplus(c), subs(r)%ndof, dofs, sd, this%build_flop_count)
+        end select
+        call this%shared_op%set_matrix(c, sd)
+        cycle
+      end if
       call touched_inverse(subs(r), regularization, dofs, sd, this%build_flop_count)
       do j = 1, n
         sd(j + 1:n, j) = sd(j, j + 1:n)
@@ -652,6 +663,36 @@ contains
     end do
     this%explicit = .true.
   end subroutine build_explicit_shared
+
+  !> sd = K^+(dofs, dofs) by solves with `kp` on the unit vectors of `dofs`
+  !> (blocks of columns), symmetrized; the solves' flops (4 per factor entry
+  !> and column) added to `flops`.
+  subroutine touched_columns(kp, ndof, dofs, sd, flops)
+    type(kplus_t), intent(inout) :: kp
+    integer(ip), intent(in) :: ndof, dofs(:)
+    real(dp), allocatable, intent(out) :: sd(:, :)
+    real(dp), intent(inout) :: flops
+    integer(ip), parameter :: block_columns = 256
+    real(dp), allocatable :: w(:, :)
+    integer(ip) :: n, j0, m, j
+    n = size(dofs, kind=ip)
+    allocate (sd(n, n))
+    call timer_start('explicit F: solves')
+    do j0 = 1, n, block_columns
+      m = min(block_columns, n - j0 + 1)
+      if (allocated(w)) deallocate (w)
+      allocate (w(ndof, m))
+      w = 0
+      do j = 1, m
+        w(dofs(j0 + j - 1), j) = 1
+      end do
+      call kp%solve_many(w)
+      sd(:, j0:j0 + m - 1) = w(dofs, :)
+    end do
+    sd = 0.5_dp*(sd + transpose(sd))
+    flops = flops + 4*real(n, dp)*real(kp%factor_bytes(), dp)/8
+    call timer_stop('explicit F: solves')
+  end subroutine touched_columns
 
   !> S^ = (the Schur complement of K_reg of `sub` on its dofs `dofs`)^{-1},
   !> K_reg exactly as K^+ builds it (kplus::regularized_system): the Schur

@@ -9,7 +9,9 @@ submodule(feti_operators) feti_builder
   use kinds, only: MPI_INT_I8, MPI_INT_IP, MPI_REAL_DP
   use decomposition, only: build_decomposition
   use subdomain, only: build_subdomain
-  use clusters, only: is_hybrid, unit_mesh, build_cluster
+  use clusters, only: is_hybrid, merges_corners, unit_mesh, build_cluster
+  use face_gluing, only: build_face_gluing
+  use materials, only: subdomain_material
   use assembly, only: assemble_subdomain
   use ritz_values, only: tridiagonal_extremes
   use constraints, only: row_dirichlet
@@ -30,6 +32,7 @@ contains
 
     call this%free()
     this%communicator = comm
+    this%young_rows = settings%scaling%scaling == 'young'
 
     call timer_start('mesh')
     call build_units(this, settings, comm, units)
@@ -38,6 +41,8 @@ contains
 
     call timer_start('assembly')
     do ls = 1, this%n_local_subs
+      if (this%hybrid .and. .not. merges_corners(settings%mesh) .and. settings%material%variation /= 'none') &
+        call element_moduli(this%subs(ls))
       call assemble_subdomain(settings%material, settings%load, this%dec, this%subs(ls))
     end do
     call timer_stop('assembly')
@@ -54,6 +59,8 @@ contains
       call MPI_Allreduce(MPI_IN_PLACE, largest, 1, MPI_INT_I8, MPI_MAX, comm, ierr)
       this%ordering_used = local_ordering_for(settings%local%local_ordering, largest)
       this%solver_used = local_solver_for(settings%local%local_solver, largest, this%hybrid)
+      ! the constrained solve of a cluster glued by faces is one kplus_t per cluster (or class)
+      if (this%hybrid .and. .not. merges_corners(settings%mesh)) this%solver_used = 'subdomain'
       write (line, '(5a,i0,a)') 'local ordering (', trim(settings%local%local_ordering), '): ', &
         trim(this%ordering_used), ' (largest subdomain ', largest, ' dofs)'
       call log_message(trim(line))
@@ -124,6 +131,19 @@ contains
     call timer_stop('dual setup')
     call memory_mark('dual setup')
 
+  contains
+
+    !> A cluster glued by faces: the modulus of every element, its subdomain's.
+    subroutine element_moduli(sub)
+      type(subdomain_t), intent(inout) :: sub
+      integer(ip) :: e
+      real(dp) :: nu
+      allocate (sub%elem_young(sub%nelem))
+      do e = 1, sub%nelem
+        call subdomain_material(settings%material, this%sub_dec, this%sub_dec%subdomain_of_element(sub%elem_gid(e)), &
+                                sub%elem_young(e), nu)
+      end do
+    end subroutine element_moduli
   end subroutine setup
 
   !> The decomposition and the local units (subdomains, or clusters of them
@@ -150,7 +170,12 @@ contains
     allocate (this%subs(this%n_local_subs))
     do ls = 1, this%n_local_subs
       if (this%hybrid) then
-        call build_cluster(this%sub_dec, this%dec, this%dec%local_subdomains(ls), this%subs(ls))
+        call build_cluster(this%sub_dec, this%dec, this%dec%local_subdomains(ls), this%subs(ls), &
+                           merge_corners=merges_corners(settings%mesh))
+        ! face moments and edge averages (the edges for checkerboards; with one
+        ! element across, a face's nodes are all on its edges: faces alone; docs/THEORY.md)
+        if (.not. merges_corners(settings%mesh)) &
+          call build_face_gluing(this%sub_dec, this%subs(ls), edges=all(settings%mesh%nel >= 2))
       else
         call build_subdomain(this%dec, this%dec%local_subdomains(ls), this%subs(ls))
       end if
@@ -158,8 +183,14 @@ contains
     if (this%hybrid) then
       block
         character(len=200) :: line
-        write (line, '(a,i0,a,i0,a,3(1x,i0),a)') 'hybrid TFETI: ', this%sub_dec%nsubdomains, ' subdomains in ', &
-          this%dec%nsubdomains, ' clusters of', settings%mesh%cluster, ' (corners assembled inside a cluster)'
+        if (merges_corners(settings%mesh)) then
+          write (line, '(a,i0,a,i0,a,3(1x,i0),a)') 'hybrid TFETI: ', this%sub_dec%nsubdomains, ' subdomains in ', &
+            this%dec%nsubdomains, ' clusters of', settings%mesh%cluster, ' (corners assembled inside a cluster)'
+        else
+          write (line, '(a,i0,a,i0,a,3(1x,i0),a)') 'hybrid TFETI: ', this%sub_dec%nsubdomains, ' subdomains in ', &
+            this%dec%nsubdomains, ' clusters of', settings%mesh%cluster, &
+            ' (faces glued by their 6 rigid-body moments inside a cluster)'
+        end if
         call log_message(line)
       end block
     end if

@@ -47,6 +47,7 @@ module feti_operators
     type(decomposition_t) :: dec                 !< the FETI units: subdomains, or clusters (hybrid)
     type(decomposition_t) :: sub_dec             !< hybrid TFETI (&mesh cluster): the subdomains
     logical :: hybrid = .false.
+    logical :: young_rows = .true.               !< &solver scaling = 'young' (B's rows weighted by moduli)
     type(subdomain_t), allocatable :: subs(:)
     type(b_operator_t) :: b                      !< B, B^T, G, G^T
     type(f_operator_t) :: f                      !< F = B K^+ B^T
@@ -359,6 +360,13 @@ contains
     type(dual_preconditioner_t), intent(inout) :: prec
     character(len=*), intent(in) :: kind
     real(dp), intent(in) :: weights(:)
+    integer(ip) :: ls
+    ! clusters of several moduli (glued by faces): B_D = B diag(1/w) with the
+    ! weight of every dof's subdomain, applied per cluster (not per class)
+    if (this%young_rows .and. any([(allocated(this%subs(ls)%elem_young), ls = 1, this%n_local_subs)])) then
+      call prec%init(kind, this%b, this%subs, weights, dof_weights=dof_weights())
+      return
+    end if
     if (this%f%is_shared()) then
       call prec%init(kind, this%b, this%subs, weights, this%f%classes_found())
       return
@@ -370,6 +378,26 @@ contains
     else
       call prec%init(kind, this%b, this%subs, weights)
     end if
+  contains
+    !> weights(ls) E_e/E_s of an element e holding the dof, for every dof of the
+    !> concatenated vector (E_s = sub%young; a node's elements are of one subdomain)
+    function dof_weights() result(wd)
+      real(dp), allocatable :: wd(:)
+      integer(ip) :: r(2), e, a
+      allocate (wd(this%b%n_concat()))
+      do ls = 1, this%n_local_subs
+        r = this%b%dof_range(ls)
+        wd(r(1):r(2)) = weights(ls)
+        if (.not. allocated(this%subs(ls)%elem_young)) cycle
+        do e = 1, this%subs(ls)%nelem
+          do a = 1, 8
+            associate (n => this%subs(ls)%elem_nodes(a, e))
+              wd(r(1) + 3*(n - 1):r(1) + 3*n - 1) = weights(ls)*this%subs(ls)%elem_young(e)/this%subs(ls)%young
+            end associate
+          end do
+        end do
+      end do
+    end function dof_weights
   end subroutine init_preconditioner
 
   !> True when the Dirichlet preconditioner can take S_s of every subdomain

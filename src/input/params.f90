@@ -765,15 +765,16 @@ contains
     status = 0
     msg = ''
     associate (m => p%mesh)
+      if (any(m%cluster > 1) .and. m%cluster_gluing == 'corners') then
+        if (p%material%variation /= 'none') call fail('mesh', 'cluster_gluing', &
+          "= 'corners' needs &material variation = 'none' (merged corners have one modulus)", m%cluster_gluing)
+        if (p%solver%preconditioner%preconditioner == 'dirichlet') call fail('mesh', 'cluster_gluing', &
+          "= 'corners' works with &solver preconditioner = 'none' or 'lumped', not 'dirichlet'", m%cluster_gluing)
+      end if
       if (any(m%cluster > 1)) then
-        if (p%material%variation /= 'none') call fail('mesh', 'cluster', &
-          "> 1 (hybrid TFETI) needs &material variation = 'none'", ints(m%cluster))
-        if (p%solver%preconditioner%preconditioner == 'dirichlet') call fail('mesh', 'cluster', &
-          "> 1 (hybrid TFETI) works with &solver preconditioner = 'none' or 'lumped', not 'dirichlet'", &
-          ints(m%cluster))
         if (p%solver%f_action%f_action == 'explicit') call fail('mesh', 'cluster', &
-          "> 1 (hybrid TFETI) works with &solver f_action = 'implicit' or 'auto' (which then stays implicit)", &
-          ints(m%cluster))
+          "> 1 (hybrid TFETI) works with &solver f_action = 'implicit' or 'auto' (explicit only for classes "// &
+          "of congruent clusters)", ints(m%cluster))
         if (p%solver%local%local_solver == 'dense') call fail('mesh', 'cluster', &
           "> 1 (hybrid TFETI) works with &solver local_solver = 'auto', 'block' or 'subdomain', not 'dense'", &
           ints(m%cluster))
@@ -848,73 +849,93 @@ contains
   subroutine resolve_cluster(p, nranks)
     type(params_t), intent(inout) :: p
     integer, intent(in) :: nranks
-    character(len=160) :: reason
+    character(len=240) :: reason
     if (.not. all(p%mesh%cluster == 0)) return
     p%mesh%cluster = auto_cluster(p, nranks, reason)
     p%mesh%cluster_auto = .true.
     p%mesh%cluster_choice = reason
   end subroutine resolve_cluster
 
-  !> The automatic choice of hybrid TFETI clusters (docs/INPUT.md `cluster`).
-  !> Clusters pay where the coarse problem dominates: subdomains of at most
-  !> `auto_max_nel` = 2 elements per direction (H/h <= 2), at least
-  !> 512 (H/h)^3 of them (H/h the largest entry of nel: 512 subdomains of one
-  !> element, 4096 of 2^3; fewer do not pay). Then, per direction, the
-  !> largest divisor c of nsub with nel*c <= `auto_cluster_edge` = 4
-  !> elements along the cluster's edge, reduced (largest entry first) until
-  !> every rank holds at least `auto_clusters_per_rank` = 4 clusters (a
-  !> balance guard: a cluster lives on one rank). [1, 1, 1]
-  !> (plain TFETI) whenever a requirement of hybrid TFETI fails (box
-  !> decomposition, uniform material, no Dirichlet preconditioner, implicit
-  !> F) or the rule does not fire; `reason` says which.
+  !> The automatic choice of hybrid TFETI clusters (docs/INPUT.md `cluster`,
+  !> docs/THEORY.md "Automatic choice of clusters"): plain TFETI or clusters
+  !> glued by faces, whichever a cost model of the run finds cheaper. With
+  !> N_u units (subdomains or clusters) of n_u dofs and H/h = the elements
+  !> along a unit's longest edge, a run costs about
+  !>   k(H/h) (a N_u n_u^(4/3) + b (6 N_u)^(4/3)) + c (6 N_u)^2
+  !> (Hessian products k(H/h) = 6 (1 + ln H/h), each with a sparse local
+  !> solve per unit and a coarse solve; the coarse factorization once; the
+  !> exponents of nested dissection in 3D, the constants measured on 2
+  !> ranks). Candidates: clusters of k subdomains per direction (1 where k
+  !> does not divide nsub_d), k = 2 .. 4, with at least `clusters_per_rank`
+  !> clusters per rank; clusters
+  !> are chosen when the cheapest candidate costs at most `margin` times
+  !> plain TFETI and there are at least `min_subdomains` subdomains (below,
+  !> the coarse problem costs too little to pay for anything). [1, 1, 1]
+  !> whenever a requirement fails; `reason` gives the model's inputs and verdict.
   function auto_cluster(p, nranks, reason) result(c)
     type(params_t), intent(in) :: p
     integer, intent(in) :: nranks
     character(len=*), intent(out) :: reason
     integer(ip) :: c(3)
-    integer(ip), parameter :: auto_max_nel = 2, auto_min_subdomains = 512, auto_cluster_edge = 4, &
-                              auto_clusters_per_rank = 4
-    integer(ip) :: d, k, hh
+    integer(ip), parameter :: min_subdomains = 512, clusters_per_rank = 4, max_edge = 4
+    !> the chosen clusters' cost at most this fraction of plain TFETI's (the model's error)
+    real(dp), parameter :: margin = 0.8_dp
+    integer(ip) :: k, t(3)
+    real(dp) :: plain, best, cost
     c = 1
     associate (nsub => p%mesh%nsub, nel => p%mesh%nel)
-      if (p%mesh%decomposition /= 'box') then
-        reason = "plain TFETI: hybrid TFETI needs decomposition = 'box'"
-      else if (p%material%variation /= 'none') then
-        reason = "plain TFETI: hybrid TFETI needs &material variation = 'none'"
-      else if (p%solver%preconditioner%preconditioner == 'dirichlet') then
-        reason = "plain TFETI: hybrid TFETI does not take &solver preconditioner = 'dirichlet'"
-      else if (p%solver%f_action%f_action == 'explicit') then
-        reason = "plain TFETI: hybrid TFETI does not take &solver f_action = 'explicit'"
-      else if (p%solver%local%local_solver == 'dense') then
-        reason = "plain TFETI: hybrid TFETI does not take &solver local_solver = 'dense'"
-      else if (any(nel > auto_max_nel)) then
-        reason = 'plain TFETI: subdomains of more than 2 elements in a direction (clusters pay for H/h <= 2)'
-      else if (product(int(nsub, i8)) < int(auto_min_subdomains, i8)*maxval(nel)**3) then
-        hh = maxval(nel)
-        write (reason, '(a,i0,a,i0,a)') 'plain TFETI: fewer than ', auto_min_subdomains*hh**3, &
-          ' subdomains (clusters pay from 512 (H/h)^3 on, H/h = ', hh, ')'
-      else
-        do d = 1, 3
-          do k = max(auto_cluster_edge/nel(d), 1_ip), 1_ip, -1_ip
-            if (mod(nsub(d), k) == 0) exit
-          end do
-          c(d) = k
-        end do
-        do while (any(c > 1) .and. product(int(nsub/c, i8)) < int(auto_clusters_per_rank, i8)*nranks)
-          d = maxloc(c, 1)
-          do k = c(d) - 1, 1, -1
-            if (mod(nsub(d), k) == 0) exit
-          end do
-          c(d) = k
-        end do
-        if (all(c == 1)) then
-          reason = 'plain TFETI: no cluster size divides nsub with enough clusters per rank'
-        else
-          reason = 'hybrid TFETI: small subdomains (H/h <= 2) by the hundred (>= 512 (H/h)^3), '// &
-                   'clusters of up to 4 elements per edge'
+      plain = run_cost(int(product(int(nsub, i8)), i8), [1_ip, 1_ip, 1_ip])
+      best = huge(1.0_dp)
+      do k = 2, max_edge
+        t = merge(k, 1_ip, mod(nsub, k) == 0)
+        if (all(t == 1)) cycle
+        if (product(int(nsub/t, i8)) < int(clusters_per_rank, i8)*nranks) cycle
+        cost = run_cost(product(int(nsub/t, i8)), t)
+        if (cost < best) then
+          best = cost
+          c = t
         end if
+      end do
+      if (p%mesh%decomposition /= 'box') then
+        c = 1
+        reason = "plain TFETI: clusters need decomposition = 'box'"
+      else if (p%solver%f_action%f_action == 'explicit') then
+        c = 1
+        reason = "plain TFETI: clusters do not take &solver f_action = 'explicit'"
+      else if (p%solver%local%local_solver == 'dense') then
+        c = 1
+        reason = "plain TFETI: clusters do not take &solver local_solver = 'dense'"
+      else if (all(c == 1)) then
+        reason = 'plain TFETI: no cluster size divides nsub with enough clusters per rank'
+      else if (product(int(nsub, i8)) < min_subdomains .or. best > margin*plain) then
+        reason = 'plain TFETI: cost model '//trim(adjustl(model_line(plain, best, c)))
+        c = 1
+      else
+        reason = 'clusters glued by faces: cost model '//trim(adjustl(model_line(plain, best, c)))
       end if
     end associate
+  contains
+    !> The model's cost [s] of `nunits` units of t(1) x t(2) x t(3) subdomains.
+    real(dp) function run_cost(nunits, t)
+      integer(i8), intent(in) :: nunits
+      integer(ip), intent(in) :: t(3)
+      real(dp), parameter :: a = 9.0e-9_dp, b = 1.45e-7_dp, cf = 1.1e-9_dp
+      real(dp) :: dofs, hh, products
+      dofs = 3*real(product(t), dp)*product(real(p%mesh%nel + 1, dp))
+      hh = real(maxval(p%mesh%nel*t), dp)
+      products = 6*(1 + log(hh))
+      run_cost = products*(a*nunits*dofs**(4.0_dp/3) + b*(6.0_dp*nunits)**(4.0_dp/3)) + cf*(6.0_dp*nunits)**2
+    end function run_cost
+
+    !> The model's verdict in one line.
+    function model_line(plain, best, t) result(line)
+      real(dp), intent(in) :: plain, best
+      integer(ip), intent(in) :: t(3)
+      character(len=200) :: line
+      write (line, '(a,es8.2,a,3(i0,a),es8.2,a,i0,a,i0,a,f4.2,a,i0,a)') 'plain ', plain, ' s, clusters ', t(1), 'x', &
+        t(2), 'x', t(3), ' ', best, ' s (', product(int(p%mesh%nsub, i8)), ' subdomains, H/h = ', &
+        maxval(p%mesh%nel), ', clusters if <= ', margin, ' x plain, >= ', min_subdomains, ' subdomains)'
+    end function model_line
   end function auto_cluster
 
   !> The variables of group `name` as the namelist writes them (see

@@ -23,7 +23,16 @@
 !> The added block couples only the dofs of F (3|F| <= 36 of them), so K_reg
 !> keeps the sparsity of K plus one small dense block. Its upper triangle goes
 !> to MUMPS (SYM = 1, MPI_COMM_SELF, one instance per subdomain kept for the
-!> repeated solves). Ordering: 'metis' = METIS nested dissection of the node
+!> repeated solves).
+!>
+!> A cluster glued by faces (sub%C with rows, src/fem/face_gluing.f90): K^+
+!> applies u = the first block of the solution of
+!>   [K_reg  C^T] [u ]   [b]
+!>   [C      0  ] [mu] = [0],
+!> factorized once by MUMPS as a symmetric indefinite matrix (SYM = 2, AMD
+!> ordering): a generalized inverse of K restricted to null(C), whose kernel
+!> there is the cluster's 6 rigid modes (docs/THEORY.md "Hybrid TFETI").
+!> Ordering: 'metis' = METIS nested dissection of the node
 !> graph of K_reg (3x smaller than the dof graph) expanded to the dofs of each
 !> node, given to MUMPS as its pivot order; 'amd' = MUMPS's AMD.
 module kplus
@@ -52,10 +61,12 @@ module kplus
 
   type, public :: kplus_t
     integer(ip) :: ndof = 0                       !< order of K
+    integer(ip) :: nc = 0                         !< constraint rows C (a cluster glued by faces), else 0
     real(dp) :: rho = 0                           !< rho_f, stiffness of the fixing springs
     real(dp) :: gram_ratio = 0                    !< min/max eigenvalue of R_F^T R_F
     integer(ip), allocatable :: fixing_nodes(:)   !< local node numbers of F
     type(mumps_t), private :: solver
+    real(dp), allocatable, private :: w(:), wm(:, :)   !< [u; mu] of the constrained solves
   contains
     procedure :: init
     procedure :: solve
@@ -91,6 +102,16 @@ contains
     call choose_fixing_nodes(sub, this%fixing_nodes, this%gram_ratio)
     call fixing_block(sub, this%fixing_nodes, this%rho, fixing_dofs, block)
     call upper_coo(sub, fixing_dofs, block, irn, jcn, a)
+    this%nc = sub%C%nrows
+    if (this%nc > 0) then
+      call add_constraints(sub, irn, jcn, a)
+      allocate (this%w(sub%ndof + this%nc))
+      call this%solver%init(MPI_COMM_SELF, spd=.false.)
+      call this%solver%set_centralized(sub%ndof + this%nc, irn, jcn, a)
+      call this%solver%set_ordering('amd')
+      call this%solver%factorize()
+      return
+    end if
 
     call this%solver%init(MPI_COMM_SELF, spd=.true.)
     call this%solver%set_centralized(sub%ndof, irn, jcn, a)
@@ -109,6 +130,13 @@ contains
     class(kplus_t), intent(inout) :: this
     real(dp), intent(inout) :: x(:)
     if (size(x) /= this%ndof) call fatal_error('kplus%solve: x must have ndof entries')
+    if (this%nc > 0) then
+      this%w(1:this%ndof) = x
+      this%w(this%ndof + 1:) = 0
+      call this%solver%solve(this%w)
+      x = this%w(1:this%ndof)
+      return
+    end if
     call this%solver%solve(x)
   end subroutine solve
 
@@ -118,6 +146,17 @@ contains
     real(dp), intent(inout) :: x(:, :)
     if (size(x, 1) /= this%ndof) call fatal_error('kplus%solve_many: x must have ndof rows')
     if (size(x, 2) == 0) return
+    if (this%nc > 0) then
+      if (allocated(this%wm)) then
+        if (size(this%wm, 2) /= size(x, 2)) deallocate (this%wm)
+      end if
+      if (.not. allocated(this%wm)) allocate (this%wm(this%ndof + this%nc, size(x, 2)))
+      this%wm(1:this%ndof, :) = x
+      this%wm(this%ndof + 1:, :) = 0
+      call this%solver%solve(this%wm)
+      x = this%wm(1:this%ndof, :)
+      return
+    end if
     call this%solver%solve(x)
   end subroutine solve_many
 
@@ -138,7 +177,10 @@ contains
     class(kplus_t), intent(inout) :: this
     call this%solver%free()
     if (allocated(this%fixing_nodes)) deallocate (this%fixing_nodes)
+    if (allocated(this%w)) deallocate (this%w)
+    if (allocated(this%wm)) deallocate (this%wm)
     this%ndof = 0
+    this%nc = 0
     this%rho = 0
     this%gram_ratio = 0
   end subroutine free
@@ -166,6 +208,8 @@ contains
     real(dp), allocatable :: block(:, :)
     real(dp) :: ratio, rho
     call check_subdomain(sub)
+    if (sub%C%nrows > 0) call fatal_error('kplus: a cluster glued by faces has no K_reg of its own '// &
+                                          '(its K^+ is the constrained solve of kplus_t)')
     if (.not. (regularization > 0)) call fatal_error('kplus: the regularization must be > 0')
     rho = regularization*mean_diagonal(sub)
     if (.not. (rho > 0)) call fatal_error('kplus: K has no positive diagonal')
@@ -432,6 +476,25 @@ contains
       end do
     end do
   end subroutine upper_coo
+
+  !> Append the entries of C^T (rows 1..ndof, columns ndof+1..ndof+nc: the
+  !> upper triangle of the constrained system) to the coordinate form.
+  subroutine add_constraints(sub, irn, jcn, a)
+    type(subdomain_t), intent(in) :: sub
+    integer(ip), allocatable, intent(inout) :: irn(:), jcn(:)
+    real(dp), allocatable, intent(inout) :: a(:)
+    integer(ip) :: i, k, n0
+    n0 = size(a, kind=ip)
+    irn = [irn, (0_ip, k = 1, sub%C%nnz())]
+    jcn = [jcn, (0_ip, k = 1, sub%C%nnz())]
+    a = [a, sub%C%values(1:sub%C%nnz())]
+    do i = 1, sub%C%nrows
+      do k = sub%C%rowptr(i), sub%C%rowptr(i + 1) - 1
+        irn(n0 + k) = sub%C%colind(k)
+        jcn(n0 + k) = sub%ndof + i
+      end do
+    end do
+  end subroutine add_constraints
 
   !> Pivot order of the dofs (perm(dof) = its position) from METIS nested
   !> dissection of the node graph of K_reg: nodes coupled by K, plus the clique

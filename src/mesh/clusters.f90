@@ -1,9 +1,14 @@
 !> Hybrid (two-level) TFETI: box subdomains grouped into clusters of
 !> `&mesh cluster` = (cx, cy, cz) subdomains. The FETI unit (K^+, R, the 6
-!> rows of G) is the cluster: its subdomains are glued at their corner nodes
-!> (the nodes at subdomain vertices, all(mod(ijk, nel) == 0)) by partial
-!> assembly, while every other node keeps one copy per subdomain, glued by B
-!> rows as between clusters (docs/THEORY.md, "Hybrid TFETI").
+!> rows of G) is the cluster. `&mesh cluster_gluing` says how its subdomains
+!> are glued inside it:
+!> - 'faces' (the default): every node keeps one copy per subdomain, glued by
+!>   B rows as between clusters, and every face two subdomains of the cluster
+!>   share adds 6 rows C = Q_f^T (u^i - u^j) (Q_f the face's orthonormal
+!>   rigid modes) that the cluster's K^+ imposes (`face_gluing`, kplus);
+!> - 'corners': the corner nodes (subdomain vertices, all(mod(ijk, nel) ==
+!>   0)) are merged by partial assembly, every other node as for 'faces'
+!>   without C (docs/THEORY.md, "Hybrid TFETI").
 !>
 !> The clusters form a box decomposition themselves: nsub/cluster clusters
 !> per direction of nel*cluster elements each (`unit_mesh`), so the
@@ -20,7 +25,7 @@ module clusters
   implicit none
   private
 
-  public :: is_hybrid, unit_mesh, cluster_of_subdomain, is_corner, node_copies, build_cluster
+  public :: is_hybrid, merges_corners, unit_mesh, cluster_of_subdomain, is_corner, node_copies, build_cluster
 
 contains
 
@@ -29,6 +34,12 @@ contains
     type(mesh_settings_t), intent(in) :: m
     is_hybrid = any(m%cluster > 1)
   end function is_hybrid
+
+  !> Hybrid TFETI whose clusters merge their corner nodes (cluster_gluing = 'corners').
+  pure logical function merges_corners(m)
+    type(mesh_settings_t), intent(in) :: m
+    merges_corners = is_hybrid(m) .and. m%cluster_gluing == 'corners'
+  end function merges_corners
 
   !> The mesh settings of the cluster-level box decomposition: nsub/cluster
   !> units per direction of nel*cluster elements (the same global mesh).
@@ -67,15 +78,18 @@ contains
   !> into one. Copy k (1..m) has the representative subdomain reps(k) (the
   !> smallest of its merged subdomains; reps ascending), the cluster
   !> units(k) and merged(k) subdomains; member(i) = the copy of s_i.
-  !> Without merging (m = n) this is the plain list.
-  pure subroutine node_copies(dec, udec, gid, reps, units, merged, member, m)
+  !> Without merging (m = n; `merge_corners` false, default true) this is
+  !> the plain list.
+  pure subroutine node_copies(dec, udec, gid, reps, units, merged, member, m, merge_corners)
     type(decomposition_t), intent(in) :: dec, udec
     integer(ip), intent(in) :: gid
     integer(ip), intent(out) :: reps(8), units(8), merged(8), member(8), m
+    logical, intent(in), optional :: merge_corners
     integer(ip) :: ids(8), n, i, k, u
     logical :: corner
     call dec%node_subdomain_list(gid, ids, n)
     corner = is_corner(dec, gid)
+    if (present(merge_corners)) corner = corner .and. merge_corners
     m = 0
     do i = 1, n
       u = cluster_of_subdomain(dec, udec, ids(i))
@@ -94,19 +108,24 @@ contains
   end subroutine node_copies
 
   !> Geometry of cluster `id` of `udec` as one FETI unit: its elements, one
-  !> local node per corner node and one per (node, subdomain) pair for the
-  !> other nodes (sub%node_copy), coordinates, centroid. node_gid ascending,
-  !> copies of one node ordered by subdomain id (a merged corner first).
-  subroutine build_cluster(dec, udec, id, sub)
+  !> local node per corner node (with `merge_corners`, default true) and one
+  !> per (node, subdomain) pair for the other nodes (sub%node_copy),
+  !> coordinates, centroid. node_gid ascending, copies of one node ordered by
+  !> subdomain id (a merged corner first).
+  subroutine build_cluster(dec, udec, id, sub, merge_corners)
     type(decomposition_t), intent(in) :: dec, udec
     integer(ip), intent(in) :: id
     type(subdomain_t), intent(out) :: sub
+    logical, intent(in), optional :: merge_corners
+    logical :: merge
     integer(i8), allocatable :: keys(:)
     integer(ip), allocatable :: loc(:)
     integer(ip) :: e, a, n, i, nodes(8), s
     integer(i8) :: base, last
 
     if (id < 1 .or. id > udec%nsubdomains) call fatal_error('build_cluster: no such cluster id')
+    merge = .true.
+    if (present(merge_corners)) merge = merge_corners
     base = int(dec%nsubdomains, i8) + 1
     sub%id = id
     sub%elem_gid = udec%subdomain_element_gids(id)
@@ -116,7 +135,7 @@ contains
       nodes = dec%mesh%element_nodes(sub%elem_gid(e))
       s = dec%subdomain_of_element(sub%elem_gid(e))
       do a = 1, 8
-        if (is_corner(dec, nodes(a))) then
+        if (merge .and. is_corner(dec, nodes(a))) then
           keys(8*(e - 1) + a) = int(nodes(a), i8)*base
         else
           keys(8*(e - 1) + a) = int(nodes(a), i8)*base + s
@@ -153,4 +172,5 @@ contains
     end do
     sub%centroid = sum(sub%coords, dim=2)/real(n, dp)
   end subroutine build_cluster
+
 end module clusters

@@ -23,13 +23,17 @@ module mesh_settings
     !> 0,0,0: chosen by `auto_cluster` when `read_params` reads the input;
     !> settings made in code and never resolved keep 0,0,0 = plain TFETI)
     integer(ip) :: cluster(3) = [0, 0, 0]
+    !> how the subdomains of a cluster are glued inside it: 'faces' (the 6
+    !> rigid-body moments of every face two of them share, constraints of the
+    !> cluster's local solve) | 'corners' (corner nodes merged by partial assembly)
+    character(len=name_len) :: cluster_gluing = 'faces'
     !> decomposition = 'metis': elements per block edge of the block grid METIS
     !> partitions (0: automatic, see src/mesh/decomposition.f90)
     integer(ip) :: metis_block = 0
     !> not namelist variables: set by `resolve_cluster` (read_params) when
     !> `cluster` was 0,0,0: then `cluster` holds the choice, and the reason
     logical :: cluster_auto = .false.
-    character(len=160) :: cluster_choice = ''
+    character(len=240) :: cluster_choice = ''
   contains
     procedure :: check => mesh_settings_check
     procedure :: group => mesh_settings_group
@@ -63,6 +67,8 @@ contains
     else if (.not. (all(self%cluster == 0) .or. all(self%cluster >= 1))) then
       call refuse('cluster', 'each entry must be >= 1, or all three 0 (automatic choice)', ints(self%cluster), &
                    variable, rule, got)
+    else if (.not. any(self%cluster_gluing == [character(len=8) :: 'faces', 'corners'])) then
+      call refuse('cluster_gluing', "must be 'faces' or 'corners'", self%cluster_gluing, variable, rule, got)
     else if (self%metis_block < 0) then
       call refuse('metis_block', 'must be 0 (automatic) or a block edge b >= 1 in elements', ints([self%metis_block]), &
                    variable, rule, got)
@@ -95,7 +101,7 @@ contains
     class(mesh_settings_t), intent(in) :: self
     character(len=name_len), allocatable, intent(out) :: names(:)
     names = [character(len=name_len) :: 'nsub', 'nel', 'lengths', 'distortion', 'distortion_seed', &
-        'decomposition', 'mapping', 'cluster', 'metis_block']
+        'decomposition', 'mapping', 'cluster', 'cluster_gluing', 'metis_block']
   end subroutine mesh_settings_variables
 
   !> Read the group text `group` ('&mesh ... /'); strings lower case.
@@ -106,18 +112,20 @@ contains
     character(len=*), intent(out) :: msg
     integer(ip) :: nsub(3), nel(3), cluster(3), metis_block, distortion_seed
     real(dp) :: lengths(3), distortion
-    character(len=name_len) :: decomposition, mapping
-    namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping, cluster, metis_block
+    character(len=name_len) :: decomposition, mapping, cluster_gluing
+    namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping, cluster, &
+      cluster_gluing, metis_block
     nsub = self%nsub; nel = self%nel; lengths = self%lengths
     distortion = self%distortion; distortion_seed = self%distortion_seed
     decomposition = self%decomposition; mapping = self%mapping; cluster = self%cluster
-    metis_block = self%metis_block
+    metis_block = self%metis_block; cluster_gluing = self%cluster_gluing
     read (group, nml=mesh, iostat=status, iomsg=msg)
     if (status /= 0) return
     self%nsub = nsub; self%nel = nel; self%lengths = lengths
     self%distortion = distortion; self%distortion_seed = distortion_seed
     self%decomposition = lower_case(decomposition); self%mapping = lower_case(mapping)
     self%cluster = cluster; self%metis_block = metis_block
+    self%cluster_gluing = lower_case(cluster_gluing)
   end subroutine mesh_settings_read
 
   !> Write the group as the namelist '&mesh ... /' (strings quoted).
@@ -128,12 +136,13 @@ contains
     character(len=*), intent(out) :: msg
     integer(ip) :: nsub(3), nel(3), cluster(3), metis_block, distortion_seed
     real(dp) :: lengths(3), distortion
-    character(len=name_len) :: decomposition, mapping
-    namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping, cluster, metis_block
+    character(len=name_len) :: decomposition, mapping, cluster_gluing
+    namelist /mesh/ nsub, nel, lengths, distortion, distortion_seed, decomposition, mapping, cluster, &
+      cluster_gluing, metis_block
     nsub = self%nsub; nel = self%nel; lengths = self%lengths
     distortion = self%distortion; distortion_seed = self%distortion_seed
     decomposition = self%decomposition; mapping = self%mapping; cluster = self%cluster
-    metis_block = self%metis_block
+    metis_block = self%metis_block; cluster_gluing = self%cluster_gluing
     lines = ''
     write (lines, nml=mesh, delim='quote', iostat=status, iomsg=msg)
   end subroutine mesh_settings_write

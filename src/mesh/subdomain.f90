@@ -31,6 +31,14 @@ module subdomain
     type(csr_t) :: K                                    !< stiffness (full symmetric storage)
     real(dp), allocatable :: f(:)                       !< (ndof) load
     real(dp), allocatable :: R(:, :)                    !< (ndof, 6) orthonormal kernel basis
+    !> hybrid TFETI glued by faces only: the cluster's gluing rows C (6 per
+    !> face two of its subdomains share: Q_f^T (u^i - u^j) on the face's
+    !> nodes, Q_f the face's orthonormal rigid modes); 0 rows otherwise. The
+    !> cluster's K^+ solves with K restricted to C u = 0 (kplus).
+    type(csr_t) :: C
+    !> hybrid TFETI glued by faces only: Young's modulus of every element
+    !> (its subdomain's); unallocated: `young` for all elements
+    real(dp), allocatable :: elem_young(:)
   end type subdomain_t
 
 contains

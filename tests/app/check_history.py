@@ -52,7 +52,7 @@ U_BOUND = 1e3 * TOL
 # the contact force is the sum of the multipliers: the same bound, relative.
 F_BOUND = 1e3 * TOL
 
-BASE = """&mesh nsub = 2, 2, 2, nel = 4, 4, 4 /
+BASE = """&mesh {mesh} /
 &material young = 2.1e5, poisson = 0.3 /
 &boundary top_dirichlet = .true., top_displacement = 0.0, 0.0, {uz!r} /
 &obstacle shape = 'sphere', radius = 1.0, gap = {gap!r} /
@@ -63,9 +63,12 @@ BASE = """&mesh nsub = 2, 2, 2, nel = 4, 4, 4 /
 TOP_UZ = -0.02
 
 
+MESH = 'nsub = 2, 2, 2, nel = 4, 4, 4'
+
+
 def write_input(path, uz, gap, out, history=''):
     with open(path, 'w') as f:
-        f.write(BASE.format(uz=uz, gap=gap, tol=TOL, out=out))
+        f.write(BASE.format(mesh=MESH, uz=uz, gap=gap, tol=TOL, out=out))
         f.write(history)
 
 
@@ -399,8 +402,11 @@ def main():
     ap.add_argument('--mpiexec', default='mpirun')
     ap.add_argument('--ranks', type=int, default=2)
     ap.add_argument('--workdir', required=True)
+    ap.add_argument('--mesh', default=None, help="the &mesh variables (default: %s)" % MESH)
     ap.add_argument('check', choices=['steps', 'restart', 'bad', 'signal', 'paraview', 'savings'])
     args = ap.parse_args()
+    if args.mesh:
+        globals()['MESH'] = args.mesh
     os.makedirs(args.workdir, exist_ok=True)
     status = {'steps': check_steps, 'restart': check_restart, 'bad': check_bad,
               'signal': check_signal, 'paraview': check_paraview, 'savings': check_savings}[args.check](args)
