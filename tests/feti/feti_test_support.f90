@@ -203,15 +203,18 @@ contains
     subs => op%subdomains()
     mine = 1
     do ls = 1, op%nlocal()
-      n = int(subs(ls)%K%nrows)
-      if (n == 0) cycle
-      allocate (a(n, n), w(n), work(max(1, 3*n)))
-      a = 0
-      do i = 1, subs(ls)%K%nrows
-        do k = subs(ls)%K%rowptr(i), subs(ls)%K%rowptr(i + 1) - 1
-          a(i, subs(ls)%K%colind(k)) = subs(ls)%K%values(k)
+      ! a member of a class holds no K: its class's (c_s K_r, the same condition number)
+      associate (kk => subs(merge(subs(ls)%k_of, ls, subs(ls)%k_of /= 0))%K)
+        n = int(kk%nrows)
+        if (n == 0) cycle
+        allocate (a(n, n), w(n), work(max(1, 3*n)))
+        a = 0
+        do i = 1, kk%nrows
+          do k = kk%rowptr(i), kk%rowptr(i + 1) - 1
+            a(i, kk%colind(k)) = kk%values(k)
+          end do
         end do
-      end do
+      end associate
       call dsyev('N', 'U', n, a, n, w, work, size(work), info)
       if (info /= 0) error stop 'dense_k_condition: dsyev failed'
       lmax = w(n)
