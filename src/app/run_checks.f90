@@ -106,8 +106,8 @@ contains
     character(len=300) :: line
     per_rank = memory_estimate_bytes(p, nranks, nunits, group_ranks)
     write (line, '(a,i0,a,i0,a)') 'memory estimate: about ', per_rank/1000000_i8, ' MB per rank, ', &
-      per_rank*nranks/1000000_i8, ' MB in all (32 MB per rank + 1.5 kB per primal dof, less the K that congruent subdomains share, '// &
-      '+ the coarse factor)'
+      per_rank*nranks/1000000_i8, ' MB in all (32 MB per rank + 1.5 kB per primal dof, less the K that congruent '// &
+      'subdomains share, + the coarse factor)'
     call log_message(line)
   end subroutine log_memory_estimate
 
