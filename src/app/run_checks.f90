@@ -92,7 +92,7 @@ contains
     if (info(3) > 0) field = 'MemAvailable'
     write (msg, '(a,f0.1,a,f0.1,a,i0,a,f0.1,3a)') 'group &mesh, variable nsub: the run does not fit in memory: about ', &
       real(per_rank, dp)/1e9_dp, ' GB per rank by the memory estimate, ', real(per_rank, dp)*info(1)/1e9_dp, &
-      ' GB for the ', nint(info(1)), ' ranks of a node, above its ', info(2)/1e9_dp, ' GB (', trim(field), &
+      ' GB for the ', nint(info(1)), ' rank(s) of a node, above its ', info(2)/1e9_dp, ' GB (', trim(field), &
       ' in /proc/meminfo); lower nsub or nel, or run on more nodes with fewer ranks on each'
     call collective_error(msg, comm, exit_input_error)
   end subroutine refuse_above_memory
