@@ -26,6 +26,7 @@
 module subdomain_classes
   use kinds, only: dp, ip
   use subdomain, only: subdomain_t
+  use q1_element, only: q1_stiffness
   implicit none
   private
 
@@ -119,10 +120,11 @@ contains
 
   !> Put subdomain `s` of `subs` (geometry and material set, K not needed)
   !> in the class of the first representative whose geometry it repeats
-  !> (congruent_geometry), with c_s = E_s / E_r; `found` false when there is
-  !> none (or `enabled` is false): the caller assembles K and calls
-  !> add_to_classes. K is linear in E, so the class is the one the
-  !> comparison of the matrices would find, without assembling K_s.
+  !> (congruent_geometry), with c_s = K_s(1,1) / K_r(1,1) (first_diagonal:
+  !> one element matrix); `found` false when there is none (or `enabled` is
+  !> false): the caller assembles K and calls add_to_classes. K is linear in
+  !> E, so the class and c_s are those the comparison of the matrices finds,
+  !> without assembling K_s.
   subroutine add_congruent(subs, s, classes, enabled, found)
     type(subdomain_t), intent(in) :: subs(:)
     integer(ip), intent(in) :: s
@@ -130,17 +132,39 @@ contains
     logical, intent(in) :: enabled
     logical, intent(out) :: found
     integer(ip) :: c, r
+    real(dp) :: kss
     found = .false.
     if (.not. enabled) return
+    kss = first_diagonal(subs(s))
+    if (.not. kss > 0) return
     do c = 1, min(classes%nclass, max_classes)
       r = classes%rep(c)
       if (.not. congruent_geometry(subs(s), subs(r))) cycle
+      if (.not. allocated(subs(r)%K%values)) cycle
+      if (subs(r)%K%colind(1) /= 1) cycle
       classes%class_of(s) = c
-      classes%scale(s) = subs(s)%young/subs(r)%young
+      classes%scale(s) = kss/subs(r)%K%values(1)
       found = .true.
       return
     end do
   end subroutine add_congruent
+
+  !> K(1,1) of `sub` exactly as assemble_stiffness forms it when local node 1
+  !> lies in element 1 alone (a box's corner: that element's matrix is the
+  !> first one computed, from its own coordinates), so that c_s = K_s(1,1) /
+  !> K_r(1,1) is the ratio the comparison of the matrices takes; -1 otherwise.
+  real(dp) function first_diagonal(sub) result(k11)
+    type(subdomain_t), intent(in) :: sub
+    real(dp) :: ke(24, 24)
+    integer(ip) :: i
+    k11 = -1
+    if (sub%nelem < 1) return
+    if (count(sub%elem_nodes == 1) /= 1) return
+    i = findloc(sub%elem_nodes(:, 1), 1, dim=1)
+    if (i == 0) return
+    call q1_stiffness(sub%coords(:, sub%elem_nodes(:, 1)), sub%young, sub%poisson, ke)
+    k11 = ke(3*i - 2, 3*i - 2)
+  end function first_diagonal
 
   !> True when `a` and `b` have the same local mesh (nodes, elements and
   !> their local nodes), node offsets from the first node equal to within
