@@ -210,16 +210,31 @@ contains
     character(len=*), intent(in) :: what
     type(MPI_Comm), intent(in) :: comm
     integer, intent(in) :: rank, nranks
-    real(dp), allocatable :: panel(:, :)
-    integer(ip) :: m, nb, kb, k0, k1, w, jb, j0, j1, h
-    integer :: info, ierr, owner
-    character(len=240) :: msg
-    m = size(a, 1, kind=ip)
-    this%m = m
+    this%m = size(a, 1, kind=ip)
     if (nranks <= 1) then
       if (rank == 0) call this%factor(a, what)
       return
     end if
+    call group_cholesky(this%m, a, what, comm, rank, nranks)
+    if (rank == 0) then
+      this%l = a
+    else if (allocated(this%l)) then
+      deallocate (this%l)
+    end if
+  end subroutine factor_group
+
+  !> The block loop of factor_group on a(m, m) (rank 0 ends with the whole
+  !> lower factor, the other ranks with their own block columns).
+  subroutine group_cholesky(m, a, what, comm, rank, nranks)
+    integer(ip), intent(in) :: m
+    real(dp), intent(inout) :: a(m, m)
+    character(len=*), intent(in) :: what
+    type(MPI_Comm), intent(in) :: comm
+    integer, intent(in) :: rank, nranks
+    real(dp), allocatable :: panel(:, :)
+    integer(ip) :: nb, kb, k0, k1, w, jb, j0, j1, h
+    integer :: info, ierr, owner
+    character(len=240) :: msg
     nb = (m + group_block - 1)/group_block
     do kb = 1, nb
       k0 = (kb - 1)*group_block + 1
@@ -250,12 +265,7 @@ contains
                    panel(j0 - k0 + 1, 1), int(h), 1.0_dp, a(j0, j0), int(m))
       end do
     end do
-    if (rank == 0) then
-      this%l = a
-    else if (allocated(this%l)) then
-      deallocate (this%l)
-    end if
-  end subroutine factor_group
+  end subroutine group_cholesky
 
   !> r <- A^{-1} r with the factor.
   subroutine solve(this, r)
