@@ -46,7 +46,7 @@ module coarse_problem
   use metis_wrapper, only: metis_node_nd
   use constraints, only: constraints_t
   use mumps_wrapper, only: mumps_t
-  use coarse_schur, only: coarse_schur_t, schur_factor_t
+  use coarse_schur, only: coarse_schur_t, schur_factor_t, group_factors
   use block_hash, only: block_hash_t
   use errors, only: fatal_error
   use text, only: counted
@@ -322,7 +322,7 @@ contains
     else
       allocate (this%red(0))
     end if
-    if (this%group_size > 1) then
+    if (group_factors(this%schur%m, this%group_size)) then
       ! every rank of the group holds S: the dense factors of S and of the
       ! face matrices S - D are computed by the group together
       if (this%group_rank /= 0) allocate (this%schur%s(this%schur%m, this%schur%m))
@@ -433,10 +433,10 @@ contains
     call timer_stop('coarse: assembly')
     call timer_start('coarse: factorization')
     t0 = MPI_Wtime()
-    if (parent%group_size > 1) then
+    if (group_factors(parent%schur%m, parent%group_size)) then
       call parent%schur%downdated_factor(all_keys, all_pos, all_g, this%sfac, parent%group_comm, &
                                          parent%group_rank, parent%group_size)
-    else
+    else if (parent%group_rank == 0) then
       call parent%schur%downdated_factor(all_keys, all_pos, all_g, this%sfac)
     end if
     this%sfac%seconds = MPI_Wtime() - t0

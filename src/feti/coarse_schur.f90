@@ -63,6 +63,14 @@ module coarse_schur
   !> Columns per block of factor_group (the block columns dealt to the
   !> group's ranks in turn).
   integer(ip), parameter :: group_block = 128
+  !> factor_group is used from this many Schur rows on (group_factors):
+  !> below, a factorization costs milliseconds on one rank and the
+  !> broadcasts' synchronizations would cost more than they save (measured:
+  !> m = 768 at 4096 subdomains, 2 ranks at load 20: 0.26 s on the host
+  !> alone, 2.4 s on the pair); the host alone keeps LAPACK's dpotrf.
+  integer(ip), parameter, public :: group_factor_rows = 1536
+
+  public :: group_factors
 
 contains
 
@@ -266,6 +274,15 @@ contains
       end do
     end do
   end subroutine group_cholesky
+
+  !> True when the dense factors of an m-row Schur complement are computed
+  !> by a group of `nranks` ranks together (factor_group), false when by
+  !> the group's host alone.
+  pure logical function group_factors(m, nranks)
+    integer(ip), intent(in) :: m
+    integer, intent(in) :: nranks
+    group_factors = nranks > 1 .and. m >= group_factor_rows
+  end function group_factors
 
   !> r <- A^{-1} r with the factor.
   subroutine solve(this, r)
