@@ -332,7 +332,7 @@ contains
         a = this%schur%s
         call this%sfac%factor_group(a, 'G G^T', this%group_comm, this%group_rank, this%group_size)
       end block
-    else
+    else if (this%group_rank == 0) then
       call this%sfac%factor(this%schur%s, 'G G^T')
     end if
     this%sfac%seconds = MPI_Wtime() - t0
