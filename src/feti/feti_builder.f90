@@ -151,7 +151,8 @@ contains
   !> 'auto'` the classes of congruent units (K^s = c_s K^r) are found as the
   !> units are assembled: a unit whose geometry repeats a representative's
   !> (subdomain_classes::add_congruent) is not assembled (subdomain_t%k_of =
-  !> the representative, k_scale = c_s = E_s / E_r); any other is assembled
+  !> the representative, k_scale = c_s = K_s(1,1) / K_r(1,1) from one element
+  !> matrix); any other is assembled
   !> and compared with the representatives' K (add_to_classes), and keeps no
   !> K when it matches one. The rank holds one K per class, the
   !> representative's, which is what K^+, the explicit F and the
@@ -167,7 +168,9 @@ contains
     look = settings%local%share_subdomains == 'auto'
     call start_classes(classes, this%n_local_subs)
     do ls = 1, this%n_local_subs
-      call build_subdomain_material(ls)
+      ! E and nu first: the geometric comparison needs them
+      call subdomain_material(settings%material, this%dec, this%subs(ls)%id, this%subs(ls)%young, &
+                              this%subs(ls)%poisson)
       call add_congruent(this%subs, ls, classes, look, found)
       call assemble_subdomain(settings%material, settings%load, this%dec, this%subs(ls), stiffness=.not. found)
       if (.not. found) call add_to_classes(this%subs, ls, classes, look)
@@ -186,13 +189,6 @@ contains
       this%subs(ls)%k_of = 0
       this%subs(ls)%k_scale = 1
     end do
-  contains
-    !> E and nu of unit ls (what the geometric comparison needs first).
-    subroutine build_subdomain_material(ls)
-      integer(ip), intent(in) :: ls
-      call subdomain_material(settings%material, this%dec, this%subs(ls)%id, this%subs(ls)%young, &
-                              this%subs(ls)%poisson)
-    end subroutine build_subdomain_material
   end subroutine assemble_units
 
   !> The decomposition and the local units (subdomains, or clusters of them
