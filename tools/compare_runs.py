@@ -13,7 +13,8 @@ own output directory (the `&output directory` of the input is replaced). Then
   echoes (new options) are left out, a setting B renamed (--renamed) is
   compared under its new name;
 - every HDF5 dataset of the run must be bit-identical (numpy.array_equal on
-  the raw arrays, NaN included).
+  the raw arrays, NaN included); a floating-point dataset that differs is
+  listed with its largest difference relative to its largest entry.
 Prints one line per input and exits 1 if any differs.
 --keep-a reuses the runs of BIN_A already in the work folder (a baseline run
 once, e.g. by --only-a, which runs BIN_A alone and compares nothing).
@@ -140,8 +141,13 @@ def compare_hdf5(dir_a, dir_b):
             continue
         for k in da:
             n += 1
-            if not np.array_equal(np.asarray(da[k]), np.asarray(db[k]), equal_nan=da[k].dtype.kind == 'f'):
-                diffs.append('%s:%s differs' % (name, k))
+            a, b = np.asarray(da[k]), np.asarray(db[k])
+            if not np.array_equal(a, b, equal_nan=a.dtype.kind == 'f'):
+                if a.dtype.kind == 'f' and a.shape == b.shape and a.size and np.max(np.abs(a)) > 0:
+                    diffs.append('%s:%s differs (max |a - b| / max |a| = %.2e)'
+                                 % (name, k, np.max(np.abs(a - b)) / np.max(np.abs(a))))
+                else:
+                    diffs.append('%s:%s differs' % (name, k))
     return diffs, n
 
 

@@ -2,8 +2,9 @@
 !> the output folder (created as the run creates it, and probed for writing),
 !> the ranks against the subdomains (clusters with hybrid TFETI), the coarse
 !> groups against the ranks (the projector's plan_coarse), the size limit of
-!> the explicit orthonormal G~; and a memory estimate of the run, logged.
-!> Each refusal is an input error (exit 2 on every rank, the group and the
+!> the explicit orthonormal G~; and a memory estimate of the run, logged, and
+!> the run refused when the estimate exceeds the memory of a node. Each
+!> refusal is an input error (exit 2 on every rank, the group and the
 !> variable named). The decomposition the checks build is the run's: the
 !> set-up takes it over (`units`).
 module run_checks
@@ -17,7 +18,10 @@ module run_checks
   use projector, only: coarse_plan_t, plan_coarse
   use orthonormal_coarse, only: check_orthonormal_size
   use hdf5_output, only: check_output_directory
-  use mpi_f08, only: MPI_Comm, MPI_Comm_size
+  use proc_status, only: meminfo_bytes
+  use mpi_f08, only: MPI_Comm, MPI_Comm_size, MPI_Comm_rank, MPI_Comm_split_type, MPI_Comm_free, &
+                     MPI_COMM_TYPE_SHARED, MPI_INFO_NULL, MPI_Allreduce, MPI_Bcast, MPI_MAXLOC, &
+                     MPI_2DOUBLE_PRECISION, MPI_DOUBLE_PRECISION
   implicit none
   private
 
@@ -51,6 +55,7 @@ contains
     if (len_trim(plan%refusal) > 0) call collective_error(plan%refusal, comm, exit_input_error)
     if (p%solver%coarse%coarse == 'orthonormal') call check_orthonormal_size(product(p%mesh%nsub), comm)
     call log_memory_estimate(p, nranks, dec%nsubdomains, plan)
+    call refuse_above_memory(memory_estimate_bytes(p, nranks, dec%nsubdomains, plan), comm)
     if (present(units)) units = dec
   end subroutine check_run
 
@@ -67,6 +72,45 @@ contains
     end if
   end subroutine decompose
 
+  !> Refuse (exit 2 on every rank, before any set-up work) a run whose memory
+  !> estimate times the ranks sharing a node exceeds that node's memory
+  !> (/proc/meminfo MemAvailable, else MemTotal; a node whose memory is not
+  !> known is not refused). The message names the worst node's numbers.
+  !> Collective.
+  subroutine refuse_above_memory(per_rank, comm)
+    integer(i8), intent(in) :: per_rank
+    type(MPI_Comm), intent(in) :: comm
+    type(MPI_Comm) :: node
+    integer :: rank, local, ierr
+    integer(i8) :: avail
+    real(dp) :: mine(2), worst(2), info(3)
+    character(len=12) :: field
+    character(len=400) :: msg
+    call MPI_Comm_rank(comm, rank, ierr)
+    call MPI_Comm_split_type(comm, MPI_COMM_TYPE_SHARED, rank, MPI_INFO_NULL, node, ierr)
+    call MPI_Comm_size(node, local, ierr)
+    call MPI_Comm_free(node, ierr)
+    field = 'MemAvailable'
+    avail = meminfo_bytes(trim(field))
+    if (avail <= 0) then
+      field = 'MemTotal'
+      avail = meminfo_bytes(trim(field))
+    end if
+    mine = [0.0_dp, real(rank, dp)]
+    if (avail > 0) mine(1) = real(per_rank, dp)*local/real(avail, dp)
+    call MPI_Allreduce(mine, worst, 1, MPI_2DOUBLE_PRECISION, MPI_MAXLOC, comm, ierr)
+    if (worst(1) <= 1) return
+    info = [real(local, dp), real(avail, dp), merge(1.0_dp, 0.0_dp, field == 'MemAvailable')]
+    call MPI_Bcast(info, 3, MPI_DOUBLE_PRECISION, nint(worst(2)), comm, ierr)
+    field = 'MemTotal'
+    if (info(3) > 0) field = 'MemAvailable'
+    write (msg, '(a,f0.1,a,f0.1,a,i0,a,f0.1,3a)') 'group &mesh, variable nsub: the run does not fit in memory: about ', &
+      real(per_rank, dp)/1e9_dp, ' GB per rank by the memory estimate, ', real(per_rank, dp)*info(1)/1e9_dp, &
+      ' GB for the ', nint(info(1)), ' rank(s) of a node, above its ', info(2)/1e9_dp, ' GB (', trim(field), &
+      ' in /proc/meminfo); lower nsub or nel, or run on more nodes with fewer ranks on each'
+    call collective_error(msg, comm, exit_input_error)
+  end subroutine refuse_above_memory
+
   !> Log the memory estimate of the run (memory_estimate_bytes).
   subroutine log_memory_estimate(p, nranks, nunits, plan)
     type(params_t), intent(in) :: p
@@ -77,25 +121,52 @@ contains
     character(len=300) :: line
     per_rank = memory_estimate_bytes(p, nranks, nunits, plan)
     write (line, '(a,i0,a,i0,a)') 'memory estimate: about ', per_rank/1000000_i8, ' MB per rank, ', &
-      per_rank*nranks/1000000_i8, ' MB in all (32 MB per rank + 1.5 kB per primal dof + the coarse factor)'
+      per_rank*nranks/1000000_i8, ' MB in all (32 MB per rank + 1.5 kB per primal dof, less the K that congruent '// &
+      'subdomains share, + the coarse factor)'
     call log_message(line)
   end subroutine log_memory_estimate
 
   !> Estimated peak bytes of the most loaded rank of a run of `p` on `nranks`
   !> ranks with `nunits` subdomains (clusters) and the coarse problem of
   !> `plan`: bytes_per_rank, bytes_per_dof times the primal dofs of the rank
-  !> with the most units (each unit's own copy of its nodes), and the coarse
-  !> factor's bytes per rank (plan_coarse).
+  !> with the most units (each unit's own copy of its nodes), less the
+  !> stiffness matrices that congruent units do not keep (shared_stiffness),
+  !> and the coarse factor's bytes per rank (plan_coarse).
   function memory_estimate_bytes(p, nranks, nunits, plan) result(bytes)
     type(params_t), intent(in) :: p
     integer, intent(in) :: nranks
     integer(ip), intent(in) :: nunits
     type(coarse_plan_t), intent(in) :: plan
     integer(i8) :: bytes
-    real(dp) :: dofs
+    real(dp) :: dofs, per_dof
+    integer(ip) :: per_rank
     ! each subdomain holds its own copy of its interface nodes
     dofs = 3*real(product(p%mesh%nel + 1), dp)*real(product(int(p%mesh%nsub, i8)), dp)
-    dofs = dofs*real((nunits + nranks - 1)/nranks, dp)/real(nunits, dp)
-    bytes = int(bytes_per_rank + bytes_per_dof*dofs + plan%factor_bytes, i8)
+    per_rank = (nunits + nranks - 1)/nranks
+    dofs = dofs*real(per_rank, dp)/real(nunits, dp)
+    per_dof = bytes_per_dof
+    if (shared_stiffness(p, per_rank)) per_dof = per_dof - stiffness_bytes_per_dof(p)
+    bytes = int(bytes_per_rank + per_dof*dofs + plan%factor_bytes, i8)
   end function memory_estimate_bytes
+
+  !> True when the units of a rank are congruent and keep one K per class
+  !> (the set-up's rule: `&solver share_subdomains = 'auto'`, box units of an
+  !> undistorted mesh, at least 2 units per rank).
+  logical function shared_stiffness(p, units_per_rank)
+    type(params_t), intent(in) :: p
+    integer(ip), intent(in) :: units_per_rank
+    shared_stiffness = p%solver%local%share_subdomains == 'auto' .and. p%mesh%decomposition == 'box' .and. &
+                       p%mesh%distortion == 0 .and. units_per_rank >= 2
+  end function shared_stiffness
+
+  !> Bytes per primal dof of a unit's K (CSR: 12 bytes per entry, 4 per row):
+  !> a box of n(1) x n(2) x n(3) Q1 elements has 9 prod(3 n + 1) entries on
+  !> 3 prod(n + 1) dofs.
+  real(dp) function stiffness_bytes_per_dof(p) result(b)
+    type(params_t), intent(in) :: p
+    real(dp) :: nel(3)
+    nel = real(p%mesh%nel, dp)
+    if (is_hybrid(p%mesh)) nel = nel*real(max(p%mesh%cluster, 1_ip), dp)
+    b = 12*9*product(3*nel + 1)/(3*product(nel + 1)) + 4
+  end function stiffness_bytes_per_dof
 end module run_checks

@@ -52,7 +52,7 @@ module dual_problem
   use qp_preconditioner, only: qp_preconditioner_t
   use qp_face, only: qp_face_t
   use feti_operators, only: feti_t, local_field_t
-  use subdomain, only: subdomain_t
+  use subdomain, only: subdomain_t, stiffness_max_abs
   use reconstruction, only: alpha_new, active_coarse_solve
   use coarse_problem, only: coarse_problem_t
   use dual_preconditioner, only: dual_preconditioner_t
@@ -250,7 +250,7 @@ contains
       mine = 0
       subs => op%subdomains()
       do ls = 1, op%nlocal()
-        mine = max(mine, maxval(abs(subs(ls)%K%values))/subs(ls)%young)
+        mine = max(mine, stiffness_max_abs(subs, ls)/subs(ls)%young)
       end do
       call MPI_Allreduce(mine, self%force_floor, 1, MPI_REAL_DP, MPI_MAX, op%comm(), ierr)
       self%force_floor = self%force_floor*self%stop_scale

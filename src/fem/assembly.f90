@@ -75,13 +75,18 @@ contains
 
   !> Material, K, f (pressure load%top_pressure on z = Lz, pushing in -z)
   !> and the orthonormal rigid body modes R (about sub%centroid) of `sub`,
-  !> whose geometry build_subdomain has filled.
-  subroutine assemble_subdomain(material, load, dec, sub)
+  !> whose geometry build_subdomain has filled. `stiffness` false: all but K
+  !> (a subdomain that shares the K of a congruent one).
+  subroutine assemble_subdomain(material, load, dec, sub, stiffness)
     type(material_settings_t), intent(in) :: material
     type(load_settings_t), intent(in) :: load
     type(decomposition_t), intent(in) :: dec
     type(subdomain_t), intent(inout) :: sub
+    logical, intent(in), optional :: stiffness
+    logical :: with_k
 
+    with_k = .true.
+    if (present(stiffness)) with_k = stiffness
     if (allocated(sub%elem_young)) then
       ! a cluster of subdomains of several moduli (glued by faces): `young` is
       ! the reference modulus, the elements carry their own
@@ -90,7 +95,7 @@ contains
     else
       call subdomain_material(material, dec, sub%id, sub%young, sub%poisson)
     end if
-    call assemble_stiffness(sub)
+    if (with_k) call assemble_stiffness(sub)
     if (allocated(sub%f)) deallocate (sub%f)
     allocate (sub%f(sub%ndof))
     sub%f = 0

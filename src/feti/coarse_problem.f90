@@ -46,7 +46,7 @@ module coarse_problem
   use metis_wrapper, only: metis_node_nd
   use constraints, only: constraints_t
   use mumps_wrapper, only: mumps_t
-  use coarse_schur, only: coarse_schur_t, schur_factor_t
+  use coarse_schur, only: coarse_schur_t, schur_factor_t, group_factors
   use block_hash, only: block_hash_t
   use errors, only: fatal_error
   use text, only: counted
@@ -57,7 +57,7 @@ module coarse_problem
                      MPI_INTEGER, MPI_INTEGER8, MPI_Allgather, MPI_Comm_split, &
                      MPI_Comm_free, MPI_COMM_NULL, MPI_UNDEFINED, MPI_IN_PLACE, &
                      MPI_Comm_split_type, MPI_COMM_TYPE_SHARED, MPI_INFO_NULL, MPI_Allreduce, MPI_MIN, MPI_MAX, MPI_SUM, &
-                     operator(/=)
+                     MPI_Bcast, operator(/=)
   implicit none
   private
 
@@ -313,14 +313,27 @@ contains
   subroutine take_schur(this)
     class(coarse_problem_t), intent(inout) :: this
     real(dp) :: t0
+    integer :: ierr
     call timer_start('coarse: factorization')
     t0 = MPI_Wtime()
     if (this%group_rank == 0) then
       allocate (this%schur%s(this%schur%m, this%schur%m), this%red(this%schur%m))
       call this%mumps%schur_complement(this%schur%s)
-      call this%sfac%factor(this%schur%s, 'G G^T')
     else
       allocate (this%red(0))
+    end if
+    if (group_factors(this%schur%m, this%group_size)) then
+      ! every rank of the group holds S: the dense factors of S and of the
+      ! face matrices S - D are computed by the group together
+      if (this%group_rank /= 0) allocate (this%schur%s(this%schur%m, this%schur%m))
+      call MPI_Bcast(this%schur%s, int(this%schur%m)**2, MPI_REAL_DP, 0, this%group_comm, ierr)
+      block
+        real(dp), allocatable :: a(:, :)
+        a = this%schur%s
+        call this%sfac%factor_group(a, 'G G^T', this%group_comm, this%group_rank, this%group_size)
+      end block
+    else if (this%group_rank == 0) then
+      call this%sfac%factor(this%schur%s, 'G G^T')
     end if
     this%sfac%seconds = MPI_Wtime() - t0
     call timer_stop('coarse: factorization')
@@ -420,7 +433,12 @@ contains
     call timer_stop('coarse: assembly')
     call timer_start('coarse: factorization')
     t0 = MPI_Wtime()
-    if (parent%group_rank == 0) call parent%schur%downdated_factor(all_keys, all_pos, all_g, this%sfac)
+    if (group_factors(parent%schur%m, parent%group_size)) then
+      call parent%schur%downdated_factor(all_keys, all_pos, all_g, this%sfac, parent%group_comm, &
+                                         parent%group_rank, parent%group_size)
+    else if (parent%group_rank == 0) then
+      call parent%schur%downdated_factor(all_keys, all_pos, all_g, this%sfac)
+    end if
     this%sfac%seconds = MPI_Wtime() - t0
     this%seconds_factorization = this%sfac%seconds
     call timer_stop('coarse: factorization')

@@ -28,7 +28,8 @@ module coarse_schur
   use kinds, only: dp, ip, i8
   use errors, only: fatal_error
   use sorting, only: sort_permutation
-  use lapack_interfaces, only: dpotrf, dpotrs, dsyev
+  use lapack_interfaces, only: dpotrf, dpotrs, dsyev, dtrsm, dgemm
+  use mpi_f08, only: MPI_Comm, MPI_Bcast, MPI_DOUBLE_PRECISION
   implicit none
   private
 
@@ -55,8 +56,21 @@ module coarse_schur
     real(dp) :: seconds = 0                   !< forming and factorizing it
   contains
     procedure :: factor
+    procedure :: factor_group
     procedure :: solve
   end type schur_factor_t
+
+  !> Columns per block of factor_group (the block columns dealt to the
+  !> group's ranks in turn).
+  integer(ip), parameter :: group_block = 128
+  !> factor_group is used from this many Schur rows on (group_factors):
+  !> below, a factorization costs milliseconds on one rank and the
+  !> broadcasts' synchronizations would cost more than they save (measured:
+  !> m = 768 at 4096 subdomains, 2 ranks at load 20: 0.26 s on the host
+  !> alone, 2.4 s on the pair); the host alone keeps LAPACK's dpotrf.
+  integer(ip), parameter, public :: group_factor_rows = 1536
+
+  public :: group_factors
 
 contains
 
@@ -118,12 +132,17 @@ contains
   !> fac = Cholesky factor of S - D, D = sum over rows of v_r v_r^T, v_r the
   !> sum of the pieces of row r: piece p adds g(:, p) at the 6 Schur rows of
   !> coarse position pos(p). Host only.
-  subroutine downdated_factor(this, keys, pos, g, fac)
+  !> With `comm`, `rank` and `nranks` (a coarse group whose every rank holds
+  !> S and the same pieces): the factor is computed by the group's ranks
+  !> together (factor_group) and held by its rank 0. Collective over comm then.
+  subroutine downdated_factor(this, keys, pos, g, fac, comm, rank, nranks)
     class(coarse_schur_t), intent(in) :: this
     integer(i8), intent(in) :: keys(:)
     integer(ip), intent(in) :: pos(:)
     real(dp), intent(in) :: g(:, :)
     type(schur_factor_t), intent(inout) :: fac
+    type(MPI_Comm), intent(in), optional :: comm
+    integer, intent(in), optional :: rank, nranks
     real(dp), allocatable :: a(:, :)
     integer(ip), allocatable :: perm(:)
     integer(ip) :: first, last, p, q, sp, sq, np, rp, rq
@@ -160,7 +179,11 @@ contains
       end do
       first = last + 1
     end do
-    call fac%factor(a, 'a face matrix of the polish or the standard reconstruction')
+    if (present(comm)) then
+      call fac%factor_group(a, 'a face matrix of the polish or the standard reconstruction', comm, rank, nranks)
+    else
+      call fac%factor(a, 'a face matrix of the polish or the standard reconstruction')
+    end if
   end subroutine downdated_factor
 
   !> l = Cholesky factor of the symmetric positive definite `a` (its lower
@@ -180,6 +203,86 @@ contains
       call fatal_error(trim(msg))
     end if
   end subroutine factor
+
+  !> The lower Cholesky factor of `a` (symmetric positive definite, the same
+  !> on every rank of `comm`, its lower triangle read) computed by the
+  !> `nranks` ranks of comm together, kept on rank 0. Right-looking by block
+  !> columns of group_block, dealt to the ranks in turn: the owner of a block
+  !> column factorizes its diagonal block (dpotrf) and the panel below it
+  !> (dtrsm) and broadcasts the panel; every rank updates the later block
+  !> columns it owns (dgemm). m^3/3 flops over the ranks, m^2/2 values
+  !> broadcast; the same factor as dpotrf's to rounding. Collective.
+  subroutine factor_group(this, a, what, comm, rank, nranks)
+    class(schur_factor_t), intent(inout) :: this
+    real(dp), intent(inout) :: a(:, :)
+    character(len=*), intent(in) :: what
+    type(MPI_Comm), intent(in) :: comm
+    integer, intent(in) :: rank, nranks
+    this%m = size(a, 1, kind=ip)
+    if (nranks <= 1) then
+      if (rank == 0) call this%factor(a, what)
+      return
+    end if
+    call group_cholesky(this%m, a, what, comm, rank, nranks)
+    if (rank == 0) then
+      this%l = a
+    else if (allocated(this%l)) then
+      deallocate (this%l)
+    end if
+  end subroutine factor_group
+
+  !> The block loop of factor_group on a(m, m) (rank 0 ends with the whole
+  !> lower factor, the other ranks with their own block columns).
+  subroutine group_cholesky(m, a, what, comm, rank, nranks)
+    integer(ip), intent(in) :: m
+    real(dp), intent(inout) :: a(m, m)
+    character(len=*), intent(in) :: what
+    type(MPI_Comm), intent(in) :: comm
+    integer, intent(in) :: rank, nranks
+    real(dp), allocatable :: panel(:, :)
+    integer(ip) :: nb, kb, k0, k1, w, jb, j0, j1, h
+    integer :: info, ierr, owner
+    character(len=240) :: msg
+    nb = (m + group_block - 1)/group_block
+    do kb = 1, nb
+      k0 = (kb - 1)*group_block + 1
+      k1 = min(kb*group_block, m)
+      w = k1 - k0 + 1
+      h = m - k0 + 1
+      owner = int(mod(kb - 1, int(nranks, ip)))
+      if (allocated(panel)) deallocate (panel)
+      allocate (panel(h, w))
+      if (rank == owner) then
+        call dpotrf('L', int(w), a(k0, k0), int(m), info)
+        if (info /= 0) then
+          write (msg, '(3a,i0,a,i0,a)') 'coarse_schur: the Cholesky factorization of the Schur complement of ', &
+            what, ' (dimension ', m, ') failed at pivot ', k0 - 1 + info, ': it is not positive definite'
+          call fatal_error(trim(msg))
+        end if
+        if (k1 < m) call dtrsm('R', 'L', 'T', 'N', int(m - k1), int(w), 1.0_dp, a(k0, k0), int(m), &
+                               a(k1 + 1, k0), int(m))
+        panel = a(k0:m, k0:k1)
+      end if
+      call MPI_Bcast(panel, int(h*w), MPI_DOUBLE_PRECISION, owner, comm, ierr)
+      if (rank == 0 .and. owner /= 0) a(k0:m, k0:k1) = panel
+      do jb = kb + 1, nb
+        if (mod(jb - 1, int(nranks, ip)) /= rank) cycle
+        j0 = (jb - 1)*group_block + 1
+        j1 = min(jb*group_block, m)
+        call dgemm('N', 'T', int(m - j0 + 1), int(j1 - j0 + 1), int(w), -1.0_dp, panel(j0 - k0 + 1, 1), int(h), &
+                   panel(j0 - k0 + 1, 1), int(h), 1.0_dp, a(j0, j0), int(m))
+      end do
+    end do
+  end subroutine group_cholesky
+
+  !> True when the dense factors of an m-row Schur complement are computed
+  !> by a group of `nranks` ranks together (factor_group), false when by
+  !> the group's host alone.
+  pure logical function group_factors(m, nranks)
+    integer(ip), intent(in) :: m
+    integer, intent(in) :: nranks
+    group_factors = nranks > 1 .and. m >= group_factor_rows
+  end function group_factors
 
   !> r <- A^{-1} r with the factor.
   subroutine solve(this, r)

@@ -106,20 +106,27 @@ contains
   !> `share` ('auto' or 'none', default 'none'): with 'auto', classes of
   !> congruent subdomains are looked for (subdomain_classes) and, when some
   !> class has two members or more, K^+ is factorized once per class
-  !> (kplus_shared_t) whatever `local_solver` says.
-  subroutine init(this, subs, local_solver, regularization, ordering, n_concat, share)
+  !> (kplus_shared_t) whatever `local_solver` says. `classes`: the classes
+  !> the caller found already (find_classes on `subs` with share = 'auto'),
+  !> needed when the members' K are shared (subdomain_t%k_of).
+  subroutine init(this, subs, local_solver, regularization, ordering, n_concat, share, classes)
     class(f_operator_t), intent(inout) :: this
     type(subdomain_t), intent(in) :: subs(:)
     character(len=*), intent(in) :: local_solver, ordering
     real(dp), intent(in) :: regularization
     integer(ip), intent(in) :: n_concat
     character(len=*), intent(in), optional :: share
+    type(subdomain_classes_t), intent(in), optional :: classes
     integer(ip) :: s
     logical :: look
     call this%free()
     look = .false.
     if (present(share)) look = share == 'auto'
-    call find_classes(subs, this%classes, look)
+    if (present(classes)) then
+      this%classes = classes
+    else
+      call find_classes(subs, this%classes, look)
+    end if
     this%sharing = this%classes%shared()
     if (this%sharing) then
       allocate (kplus_shared_t :: this%kinv)

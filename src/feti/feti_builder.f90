@@ -11,8 +11,9 @@ submodule(feti_operators) feti_builder
   use subdomain, only: build_subdomain
   use clusters, only: is_hybrid, merges_corners, unit_mesh, build_cluster
   use face_gluing, only: build_face_gluing
+  use assembly, only: assemble_subdomain, assemble_stiffness
+  use subdomain_classes, only: subdomain_classes_t, start_classes, add_congruent, add_to_classes, finish_classes
   use materials, only: subdomain_material
-  use assembly, only: assemble_subdomain
   use ritz_values, only: tridiagonal_extremes
   use constraints, only: row_dirichlet
   use lapack_interfaces, only: dsyev
@@ -29,6 +30,7 @@ contains
     integer(ip) :: ls, r(2)
     integer :: ierr
     integer(i8) :: mydofs
+    type(subdomain_classes_t) :: classes
 
     call this%free()
     this%communicator = comm
@@ -40,11 +42,7 @@ contains
     call memory_mark('mesh')
 
     call timer_start('assembly')
-    do ls = 1, this%n_local_subs
-      if (this%hybrid .and. .not. merges_corners(settings%mesh) .and. settings%material%variation /= 'none') &
-        call element_moduli(this%subs(ls))
-      call assemble_subdomain(settings%material, settings%load, this%dec, this%subs(ls))
-    end do
+    call assemble_units(this, settings, classes)
     call timer_stop('assembly')
     call memory_mark('assembly')
 
@@ -67,7 +65,7 @@ contains
     end block
     ! congruent clusters share K^+ like congruent subdomains (docs/TUNING.md "Clusters")
     call this%f%init(this%subs, this%solver_used, settings%local%regularization, this%ordering_used, &
-                     int(mydofs, ip), share=settings%local%share_subdomains(1:4))
+                     int(mydofs, ip), share=settings%local%share_subdomains(1:4), classes=classes)
     block
       character(len=160) :: line
       write (line, '(a,i0,a,i0,a)') 'local subdomains: ', this%n_local_subs, ' in ', this%f%n_classes(), &
@@ -76,7 +74,7 @@ contains
         block
           character(len=40) :: dev
           write (dev, '(es9.2)') this%f%max_class_deviation()
-          line = trim(line)//' (K^+ shared per class; max |K_s - c_s K_r| / max |K_s| ='//trim(dev)//')'
+          line = trim(line)//' (K and K^+ shared per class; max |K_s - c_s K_r| / max |K_s| ='//trim(dev)//')'
         end block
       end if
       call log_message(line)
@@ -131,20 +129,68 @@ contains
     call timer_stop('dual setup')
     call memory_mark('dual setup')
 
-  contains
-
-    !> A cluster glued by faces: the modulus of every element, its subdomain's.
-    subroutine element_moduli(sub)
-      type(subdomain_t), intent(inout) :: sub
-      integer(ip) :: e
-      real(dp) :: nu
-      allocate (sub%elem_young(sub%nelem))
-      do e = 1, sub%nelem
-        call subdomain_material(settings%material, this%sub_dec, this%sub_dec%subdomain_of_element(sub%elem_gid(e)), &
-                                sub%elem_young(e), nu)
-      end do
-    end subroutine element_moduli
   end subroutine setup
+
+  !> K^s, f^s and R^s of every local unit. With `&solver share_subdomains =
+  !> 'auto'` the classes of congruent units (K^s = c_s K^r) are found as the
+  !> units are assembled: a unit whose geometry repeats a representative's
+  !> (subdomain_classes::add_congruent) is not assembled (subdomain_t%k_of =
+  !> the representative, k_scale = c_s = K_s(1,1) / K_r(1,1) from one element
+  !> matrix); any other is assembled
+  !> and compared with the representatives' K (add_to_classes), and keeps no
+  !> K when it matches one. The rank holds one K per class, the
+  !> representative's, which is what K^+, the explicit F and the
+  !> preconditioners per class use. When the classes do not pay
+  !> (subdomain_classes_t%shared false) the paths per subdomain run, and the
+  !> members' K are assembled.
+  subroutine assemble_units(this, settings, classes)
+    class(feti_t), intent(inout) :: this
+    type(feti_settings_t), intent(in) :: settings
+    type(subdomain_classes_t), intent(out) :: classes
+    integer(ip) :: ls, r
+    logical :: look, found
+    look = settings%local%share_subdomains == 'auto'
+    call start_classes(classes, this%n_local_subs)
+    do ls = 1, this%n_local_subs
+      ! E and nu first: the geometric comparison needs them
+      call subdomain_material(settings%material, this%dec, this%subs(ls)%id, this%subs(ls)%young, &
+                              this%subs(ls)%poisson)
+      if (this%hybrid .and. .not. merges_corners(settings%mesh) .and. settings%material%variation /= 'none') &
+        call element_moduli(this, settings, this%subs(ls))
+      ! a cluster whose elements carry their own moduli is compared by its assembled K
+      call add_congruent(this%subs, ls, classes, look .and. .not. allocated(this%subs(ls)%elem_young), found)
+      call assemble_subdomain(settings%material, settings%load, this%dec, this%subs(ls), stiffness=.not. found)
+      if (.not. found) call add_to_classes(this%subs, ls, classes, look)
+      r = classes%rep(classes%class_of(ls))
+      if (r /= ls) then
+        call this%subs(ls)%K%free()
+        this%subs(ls)%k_of = r
+        this%subs(ls)%k_scale = classes%scale(ls)
+      end if
+    end do
+    call finish_classes(classes)
+    if (classes%shared()) return
+    do ls = 1, this%n_local_subs
+      if (this%subs(ls)%k_of == 0) cycle
+      call assemble_stiffness(this%subs(ls))
+      this%subs(ls)%k_of = 0
+      this%subs(ls)%k_scale = 1
+    end do
+  end subroutine assemble_units
+
+  !> A cluster glued by faces: the modulus of every element, its subdomain's.
+  subroutine element_moduli(this, settings, sub)
+    class(feti_t), intent(in) :: this
+    type(feti_settings_t), intent(in) :: settings
+    type(subdomain_t), intent(inout) :: sub
+    integer(ip) :: e
+    real(dp) :: nu
+    allocate (sub%elem_young(sub%nelem))
+    do e = 1, sub%nelem
+      call subdomain_material(settings%material, this%sub_dec, this%sub_dec%subdomain_of_element(sub%elem_gid(e)), &
+                              sub%elem_young(e), nu)
+    end do
+  end subroutine element_moduli
 
   !> The decomposition and the local units (subdomains, or clusters of them
   !> with hybrid TFETI, `&mesh cluster`) with their geometry. `units`: the

@@ -26,10 +26,11 @@
 module subdomain_classes
   use kinds, only: dp, ip
   use subdomain, only: subdomain_t
+  use q1_element, only: q1_stiffness
   implicit none
   private
 
-  public :: find_classes, share_tolerance, stiffness_deviation
+  public :: find_classes, start_classes, add_congruent, add_to_classes, finish_classes, share_tolerance, stiffness_deviation
 
   !> Multiple of eps * (max|x| / h_min + 1) accepted between the members of a class.
   real(dp), parameter, public :: share_rounding_factor = 64
@@ -60,39 +61,139 @@ contains
     type(subdomain_t), intent(in) :: subs(:)
     type(subdomain_classes_t), intent(out) :: classes
     logical, intent(in) :: enabled
-    integer(ip) :: n, s, c, k, cnt(size(subs) + 1)
-    real(dp) :: dev, scale, tol, amax
-    n = size(subs, kind=ip)
+    integer(ip) :: s
+    call start_classes(classes, size(subs, kind=ip))
+    do s = 1, size(subs, kind=ip)
+      call add_to_classes(subs, s, classes, enabled)
+    end do
+    call finish_classes(classes)
+  end subroutine find_classes
+
+  !> Empty classes for `n` subdomains, to be filled one subdomain at a time
+  !> (add_to_classes, in order s = 1..n) and closed by finish_classes: the
+  !> same classes as find_classes, while only the representatives need their
+  !> K once their members are added (the set-up assembles and drops a
+  !> member's K at once).
+  subroutine start_classes(classes, n)
+    type(subdomain_classes_t), intent(out) :: classes
+    integer(ip), intent(in) :: n
     allocate (classes%class_of(n), classes%scale(n), classes%column(n), classes%member(n))
     allocate (classes%rep(n))
+    classes%class_of = 0
+    classes%scale = 1
     classes%nclass = 0
     classes%max_deviation = 0
-    do s = 1, n
-      classes%class_of(s) = 0
-      classes%scale(s) = 1
-      if (enabled) then
-        tol = share_tolerance(subs(s))
-        amax = 0
-        if (allocated(subs(s)%K%values)) amax = maxval(abs(subs(s)%K%values))
-        do c = 1, min(classes%nclass, max_classes)
-          ! (stops at the first entry beyond tol: a distorted or METIS subdomain is told apart at once)
-          call stiffness_deviation(subs(s), subs(classes%rep(c)), scale, dev, tol, amax)
-          if (dev <= tol) then
-            classes%class_of(s) = c
-            classes%scale(s) = scale
-            classes%max_deviation = max(classes%max_deviation, dev)
-            exit
-          end if
-        end do
-      end if
-      if (classes%class_of(s) == 0) then
-        classes%nclass = classes%nclass + 1
-        classes%rep(classes%nclass) = s
-        classes%class_of(s) = classes%nclass
-      end if
+  end subroutine start_classes
+
+  !> Put subdomain `s` of `subs` (K assembled) in the class of the first
+  !> representative it matches, or make it the representative of a new class.
+  subroutine add_to_classes(subs, s, classes, enabled)
+    type(subdomain_t), intent(in) :: subs(:)
+    integer(ip), intent(in) :: s
+    type(subdomain_classes_t), intent(inout) :: classes
+    logical, intent(in) :: enabled
+    integer(ip) :: c
+    real(dp) :: dev, scale, tol, amax
+    classes%class_of(s) = 0
+    classes%scale(s) = 1
+    if (enabled) then
+      tol = share_tolerance(subs(s))
+      amax = 0
+      if (allocated(subs(s)%K%values)) amax = maxval(abs(subs(s)%K%values))
+      do c = 1, min(classes%nclass, max_classes)
+        ! (stops at the first entry beyond tol: a distorted or METIS subdomain is told apart at once)
+        call stiffness_deviation(subs(s), subs(classes%rep(c)), scale, dev, tol, amax)
+        if (dev <= tol) then
+          classes%class_of(s) = c
+          classes%scale(s) = scale
+          classes%max_deviation = max(classes%max_deviation, dev)
+          exit
+        end if
+      end do
+    end if
+    if (classes%class_of(s) == 0) then
+      classes%nclass = classes%nclass + 1
+      classes%rep(classes%nclass) = s
+      classes%class_of(s) = classes%nclass
+    end if
+  end subroutine add_to_classes
+
+  !> Put subdomain `s` of `subs` (geometry and material set, K not needed)
+  !> in the class of the first representative whose geometry it repeats
+  !> (congruent_geometry), with c_s = K_s(1,1) / K_r(1,1) (first_diagonal:
+  !> one element matrix); `found` false when there is none (or `enabled` is
+  !> false): the caller assembles K and calls add_to_classes. K is linear in
+  !> E, so the class and c_s are those the comparison of the matrices finds,
+  !> without assembling K_s.
+  subroutine add_congruent(subs, s, classes, enabled, found)
+    type(subdomain_t), intent(in) :: subs(:)
+    integer(ip), intent(in) :: s
+    type(subdomain_classes_t), intent(inout) :: classes
+    logical, intent(in) :: enabled
+    logical, intent(out) :: found
+    integer(ip) :: c, r
+    real(dp) :: kss
+    found = .false.
+    if (.not. enabled) return
+    kss = first_diagonal(subs(s))
+    if (.not. kss > 0) return
+    do c = 1, min(classes%nclass, max_classes)
+      r = classes%rep(c)
+      if (.not. congruent_geometry(subs(s), subs(r))) cycle
+      if (.not. allocated(subs(r)%K%values)) cycle
+      if (subs(r)%K%colind(1) /= 1) cycle
+      classes%class_of(s) = c
+      classes%scale(s) = kss/subs(r)%K%values(1)
+      found = .true.
+      return
     end do
+  end subroutine add_congruent
+
+  !> K(1,1) of `sub` exactly as assemble_stiffness forms it when local node 1
+  !> lies in element 1 alone (a box's corner: that element's matrix is the
+  !> first one computed, from its own coordinates), so that c_s = K_s(1,1) /
+  !> K_r(1,1) is the ratio the comparison of the matrices takes; -1 otherwise.
+  real(dp) function first_diagonal(sub) result(k11)
+    type(subdomain_t), intent(in) :: sub
+    real(dp) :: ke(24, 24)
+    integer(ip) :: i
+    k11 = -1
+    if (sub%nelem < 1) return
+    if (count(sub%elem_nodes == 1) /= 1) return
+    i = findloc(sub%elem_nodes(:, 1), 1, dim=1)
+    if (i == 0) return
+    call q1_stiffness(sub%coords(:, sub%elem_nodes(:, 1)), sub%young, sub%poisson, ke)
+    k11 = ke(3*i - 2, 3*i - 2)
+  end function first_diagonal
+
+  !> True when `a` and `b` have the same local mesh (nodes, elements and
+  !> their local nodes), node offsets from the first node equal to within
+  !> the rounding of the coordinates (8 eps max(1, max|x|), as the assembly's
+  !> reuse of an element matrix), the same Poisson ratio and positive
+  !> Young's moduli: then K^a = (E_a / E_b) K^b up to that rounding.
+  logical function congruent_geometry(a, b) result(same)
+    type(subdomain_t), intent(in) :: a, b
+    real(dp) :: tol
+    integer(ip) :: k
+    same = .false.
+    if (a%nnodes /= b%nnodes .or. a%nelem /= b%nelem .or. a%nnodes < 1) return
+    if (a%poisson /= b%poisson .or. .not. (a%young > 0 .and. b%young > 0)) return
+    if (.not. allocated(a%coords) .or. .not. allocated(b%coords)) return
+    tol = 8*epsilon(1.0_dp)*max(1.0_dp, maxval(abs(a%coords)), maxval(abs(b%coords)))
+    do k = 1, a%nnodes
+      if (maxval(abs((a%coords(:, k) - a%coords(:, 1)) - (b%coords(:, k) - b%coords(:, 1)))) > tol) return
+    end do
+    same = all(a%elem_nodes == b%elem_nodes)
+  end function congruent_geometry
+
+  !> The members by class (moff, member, column) once every subdomain is added.
+  subroutine finish_classes(classes)
+    type(subdomain_classes_t), intent(inout) :: classes
+    integer(ip) :: n, s, c, k
+    integer(ip), allocatable :: cnt(:)
+    n = size(classes%class_of, kind=ip)
     classes%rep = classes%rep(1:classes%nclass)
-    ! members by class
+    allocate (cnt(n + 1))
     cnt = 0
     do s = 1, n
       cnt(classes%class_of(s) + 1) = cnt(classes%class_of(s) + 1) + 1
@@ -110,7 +211,7 @@ contains
       classes%member(k) = s
       classes%column(s) = cnt(c)
     end do
-  end subroutine find_classes
+  end subroutine finish_classes
 
   !> True when sharing pays: the classes hold at least `min_mean_members`
   !> subdomains on average. A rank whose subdomains are almost all different

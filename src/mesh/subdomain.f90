@@ -12,7 +12,7 @@ module subdomain
   implicit none
   private
 
-  public :: build_subdomain, local_node, node_dofs
+  public :: build_subdomain, local_node, node_dofs, stiffness_matvec, stiffness_max_abs
 
   !> A subdomain and its system.
   type, public :: subdomain_t
@@ -29,6 +29,12 @@ module subdomain
     real(dp) :: centroid(3) = 0                         !< mean of the node coordinates
     real(dp) :: young = 0, poisson = 0
     type(csr_t) :: K                                    !< stiffness (full symmetric storage)
+    !> K shared per class of congruent subdomains (subdomain_classes): 0 when
+    !> K is this subdomain's own; else the local index of the subdomain whose
+    !> K, times k_scale, is this one's (K^s = k_scale K^k_of, K unallocated).
+    !> Read K through stiffness_matvec / stiffness_max_abs.
+    integer(ip) :: k_of = 0
+    real(dp) :: k_scale = 1
     real(dp), allocatable :: f(:)                       !< (ndof) load
     real(dp), allocatable :: R(:, :)                    !< (ndof, 6) orthonormal kernel basis
     !> hybrid TFETI glued by faces only: the cluster's gluing rows C (6 per
@@ -89,6 +95,32 @@ contains
       end do
     end do
   end subroutine build_subdomain
+
+  !> y = K^s x of local subdomain `s` of `subs`, its own K or its class's
+  !> (k_scale K^k_of).
+  subroutine stiffness_matvec(subs, s, x, y)
+    type(subdomain_t), intent(in) :: subs(:)
+    integer(ip), intent(in) :: s
+    real(dp), intent(in) :: x(:)
+    real(dp), intent(out) :: y(:)
+    if (subs(s)%k_of == 0) then
+      call subs(s)%K%matvec(x, y)
+    else
+      call subs(subs(s)%k_of)%K%matvec(x, y)
+      y = subs(s)%k_scale*y
+    end if
+  end subroutine stiffness_matvec
+
+  !> max |K^s| of local subdomain `s` of `subs` (its own K or its class's).
+  real(dp) function stiffness_max_abs(subs, s) result(amax)
+    type(subdomain_t), intent(in) :: subs(:)
+    integer(ip), intent(in) :: s
+    if (subs(s)%k_of == 0) then
+      amax = maxval(abs(subs(s)%K%values))
+    else
+      amax = subs(s)%k_scale*maxval(abs(subs(subs(s)%k_of)%K%values))
+    end if
+  end function stiffness_max_abs
 
   !> Local number of global node `gid` in `sub` (binary search), 0 if absent.
   pure integer(ip) function local_node(sub, gid)
