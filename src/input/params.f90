@@ -109,6 +109,7 @@ contains
     if (rank == 0) then
       call read_file(file, p, status, msg)
       if (status == 0) call check_params(p, status, msg)
+      if (status == 0) p%obstacle%axis = p%obstacle%centre_of(p%mesh%lengths)   ! echoed resolved
       if (status == 0) then
         call resolve_cluster(p, nranks)
         call check_params(p, status, msg)     ! (the automatic choice meets every check by construction)
@@ -819,6 +820,7 @@ contains
     if (len(variable) > 0) call fail('reconstruction', variable, rule, got)
     call p%output%check(variable, rule, got)
     if (len(variable) > 0) call fail('output', variable, rule, got)
+    if (status == 0) call check_obstacle_axis(p, status, msg)
 
   contains
 
@@ -830,6 +832,32 @@ contains
             ' (got '//trim(got)//')'
     end subroutine fail
   end subroutine check_params
+
+  !> A symmetry plane must contain the sphere's axis (&obstacle axis): a plane
+  !> off the axis models the mirror image of the obstacle on its other side,
+  !> which only &obstacle mirror_images = .true. accepts.
+  subroutine check_obstacle_axis(p, status, msg)
+    type(params_t), intent(in) :: p
+    integer, intent(inout) :: status
+    character(len=*), intent(inout) :: msg
+    real(dp) :: c(2)
+    integer :: d
+    character(len=*), parameter :: plane(2) = ['symmetry_x0', 'symmetry_y0'], xy(2) = ['x', 'y']
+    logical :: on(2)
+    if (p%obstacle%shape /= 'sphere' .or. p%obstacle%mirror_images) return
+    c = p%obstacle%centre_of(p%mesh%lengths)
+    on = [p%boundary%symmetry_x0, p%boundary%symmetry_y0]
+    do d = 1, 2
+      if (.not. on(d) .or. c(d) == 0) cycle
+      status = 1
+      write (msg, '(a,i0,a,es10.3,a)') 'file '//trim(p%file)//', group &boundary, variable '//plane(d)// &
+        ': the symmetry plane '//xy(d)//' = 0 does not contain the obstacle''s axis (&obstacle axis(', d, &
+        ') = ', c(d), '; the default is the face centre): put the sphere on the plane (&obstacle axis('// &
+        achar(48 + d)//') = 0.0) or, if mirror images of the obstacle are meant, set &obstacle '// &
+        'mirror_images = .true.'
+      return
+    end do
+  end subroutine check_obstacle_axis
 
   !> Settings that are valid but probably not what was meant: each a sentence
   !> naming the group and the variable (the log and report.json's `warnings`).
