@@ -14,6 +14,7 @@ module run_checks
   use coarse_problem, only: choose_coarse_ranks, estimated_factor_bytes, dense_for, ranks_per_node
   use orthonormal_coarse, only: check_orthonormal_size
   use hdf5_output, only: check_output_directory
+  use rigid_hold, only: held_modes
   use mpi_f08, only: MPI_Comm, MPI_Comm_size
   implicit none
   private
@@ -39,6 +40,7 @@ contains
     character(len=300) :: msg
 
     call MPI_Comm_size(comm, nranks, ierr)
+    call check_held(p, comm)
     if (p%output%write_hdf5 .or. p%output%write_report) call check_output_directory(comm, p%output%directory)
     ! ranks against subdomains (or clusters): build_decomposition refuses more ranks than units
     if (is_hybrid(p%mesh)) then
@@ -52,6 +54,26 @@ contains
     if (p%solver%coarse%coarse == 'orthonormal') call check_orthonormal_size(product(p%mesh%nsub), comm)
     call log_memory_estimate(p, nranks, dec%nsubdomains, c)
   end subroutine check_run
+
+  !> Refuse a body that the Dirichlet, symmetry and contact rows together do
+  !> not hold against every rigid motion (rigid_hold: its coarse problem
+  !> would be singular). Collective; every rank computes the same.
+  subroutine check_held(p, comm)
+    type(params_t), intent(in) :: p
+    type(MPI_Comm), intent(in) :: comm
+    integer :: nheld
+    integer(ip) :: nodes
+    character(len=600) :: msg
+    call held_modes(p%mesh, p%boundary, p%obstacle, nheld, nodes)
+    if (nheld == 6) return
+    write (msg, '(a,i0,a,i0,a,es10.3,a)') 'file '//trim(p%file)//', group &obstacle, variable shape: '// &
+      'the body is held only by the contact, and the contact cannot hold it: ', nodes, &
+      ' bottom node(s) lie over the obstacle, which with the Dirichlet and symmetry rows leave ', &
+      6 - nheld, ' rigid motion(s) free (radius = ', p%obstacle%radius, &
+      '): enlarge &obstacle radius, refine &mesh nel, move &obstacle axis under the nodes, or set '// &
+      '&boundary top_dirichlet = .true.'
+    call collective_error(msg, comm, exit_input_error)
+  end subroutine check_held
 
   !> Log the memory estimate of the run (memory_estimate_bytes).
   subroutine log_memory_estimate(p, nranks, nunits, group_ranks)
