@@ -464,7 +464,7 @@ contains
         i = index(piece, '=')
         variable = lower(trim(adjustl(piece(1:i - 1))))
         msg = 'variable '//variable//': '//describe(msg2, variable, is_string(variable))// &
-              ' (in "'//trim(adjustl(piece))//'")'
+              did_you_mean(p, name, variable, msg2)//' (in "'//trim(adjustl(piece))//'")'
         return
       end if
     end do
@@ -482,6 +482,48 @@ contains
       end do
     end function is_string
   end subroutine read_group_checked
+
+  !> For a variable that is not one of group `name` (the namelist message
+  !> `iomsg` says so): '; did you mean <v>?' with the group's variable
+  !> nearest in spelling (at most 2 edits, or one starts with the other),
+  !> else ''.
+  function did_you_mean(p, name, variable, iomsg) result(text)
+    type(params_t), intent(in) :: p
+    character(len=*), intent(in) :: name, variable, iomsg
+    character(len=:), allocatable :: text, given
+    type(param_item_t), allocatable :: items(:)
+    integer :: j, d, best
+    text = ''
+    if (index(iomsg, 'Cannot match namelist object name') == 0) return
+    given = variable
+    if (index(given, '(') > 0) given = given(1:index(given, '(') - 1)
+    call param_items(p, name, items)
+    best = 3
+    do j = 1, size(items)
+      d = edit_distance(given, trim(items(j)%name))
+      if (len(given) >= 3 .and. (index(trim(items(j)%name), given) == 1 .or. &
+                                  index(given, trim(items(j)%name)) == 1)) d = min(d, 2)
+      if (d < best) then
+        best = d
+        text = '; did you mean '//trim(items(j)%name)//'?'
+      end if
+    end do
+  contains
+    !> Levenshtein distance of a and b.
+    pure integer function edit_distance(a, b) result(dist)
+      character(len=*), intent(in) :: a, b
+      integer :: row(0:len(b)), prev(0:len(b)), i, k
+      prev = [(k, k = 0, len(b))]
+      do i = 1, len(a)
+        row(0) = i
+        do k = 1, len(b)
+          row(k) = min(prev(k) + 1, row(k - 1) + 1, prev(k - 1) + merge(0, 1, a(i:i) == b(k:k)))
+        end do
+        prev = row
+      end do
+      dist = prev(len(b))
+    end function edit_distance
+  end function did_you_mean
 
   !> Turn a compiler's namelist message about `variable` into one for a user.
   !> `string`: the variable holds a string (an unquoted word then gets the hint on quotes).
@@ -868,7 +910,12 @@ contains
     allocate (w(0))
     associate (o => p%obstacle, b => p%boundary)
       ! the face z = 0 moves down by at most -uz of the prescribed top (the body only shortens)
-      if (o%shape /= 'none' .and. b%top_dirichlet .and. o%gap > -b%top_displacement(3)) then
+      if (o%shape /= 'none' .and. b%top_dirichlet .and. b%top_displacement(3) > 0) then
+        write (line, '(a,sp,es10.3,a)') '&boundary top_displacement(3) = ', b%top_displacement(3), &
+          ' moves the top face upward, away from the obstacle: a sign error? (pressing the body onto '// &
+          'the obstacle needs a negative value, e.g. -0.005)'
+        w = [character(len=msg_len) :: w, line]
+      else if (o%shape /= 'none' .and. b%top_dirichlet .and. o%gap > -b%top_displacement(3)) then
         write (line, '(a,es10.3,a,es10.3,a)') '&obstacle gap = ', o%gap, &
           ' is larger than what &boundary top_displacement(3) = ', b%top_displacement(3), &
           ' can close: the body never touches the obstacle (no contact)'
