@@ -32,16 +32,17 @@ contains
 
   !> Every check of `p` on `comm` that a run makes before its set-up work;
   !> the memory estimate logged. Collective.
-  subroutine check_run(p, comm)
+  subroutine check_run(p, comm, dry_run)
     type(params_t), intent(in) :: p
     type(MPI_Comm), intent(in) :: comm
+    logical, intent(in), optional :: dry_run   !< `--check`: create and write nothing
     type(decomposition_t) :: dec
     integer :: nranks, ierr, c
     character(len=300) :: msg
 
     call MPI_Comm_size(comm, nranks, ierr)
     call check_held(p, comm)
-    if (p%output%write_hdf5 .or. p%output%write_report) call check_output_directory(comm, p%output%directory)
+    if (p%output%write_hdf5 .or. p%output%write_report) call check_output_directory(comm, p%output%directory, dry_run)
     ! ranks against subdomains (or clusters): build_decomposition refuses more ranks than units
     if (is_hybrid(p%mesh)) then
       call build_decomposition(unit_mesh(p%mesh), comm, dec)
