@@ -26,7 +26,9 @@ module load_history
   use hdf5_output, only: check_output_directory
   use field_output, only: write_run_fields
   use xdmf, only: write_xdmf_series
-  use run_report, only: write_run_report, log_where_to_look
+  use run_report, only: write_run_report, log_where_to_look, run_case_t
+  use model_validity, only: add_validity_warnings
+  use kkt, only: check_kkt
   use report, only: print_timing_table
   use json_writer, only: json_writer_t
   use history_checkpoint, only: step_record_t, checkpoint_t, warm_state_t, write_checkpoint, read_checkpoint, &
@@ -43,6 +45,17 @@ module load_history
   !> How a step's solve started (step_record_t%warm)
   character(len=12), parameter :: start_names(0:3) = [character(len=12) :: 'cold', 'previous', 'scaled', &
                                                        'extrapolated']
+
+  !> The step report.json's top level describes: the peak (the largest load
+  !> factor, the first of equal ones), its solution, contact and solver.
+  type :: peak_step_t
+    integer(ip) :: step = 0
+    real(dp) :: factor = -huge(1.0_dp)
+    real(dp) :: seconds(3) = 0
+    type(dual_solution_t) :: sol
+    type(contact_summary_t) :: contact
+    type(smalbe_t) :: solver
+  end type peak_step_t
 
 contains
 
@@ -62,6 +75,7 @@ contains
     type(checkpoint_t) :: ck
     type(step_record_t), allocatable :: records(:)
     type(warm_state_t) :: warm
+    type(peak_step_t) :: peak
     real(dp), allocatable :: nu(:), work(:), muhat0(:)
     real(dp) :: seconds(3), last_seconds(3), t_start
     integer(i8) :: fingerprint(2)
@@ -125,7 +139,8 @@ contains
         ! same in every step; face_recycle)
         solver%polish%face%recycle%on = p%history%warm_start .and. p%history%recycle
         nu = 0
-        if (warm%n > 0 .and. p%history%warm_start) then
+        ! (the unloaded state starts cold, from its exact nu = 0: unloaded_state)
+        if (warm%n > 0 .and. p%history%warm_start .and. .not. (rec%factor == 0 .and. rec%gap >= 0)) then
           call warm_guess(warm, rec%factor, rec%gap, work, muhat0, rec%warm)
           call op%project(work, nu)
           ! contact rows without force in the guess exactly at their bound (lambda = 0), not a
@@ -137,8 +152,11 @@ contains
         last_seconds = seconds
         ! 3. the inverse: lambda, alpha_bar, u, KKT
         call dual%post_solve(nu, solver%muhat, sol)
-        call summarize_contact(op, sol%lambda, p%reconstruction%active_tol, contact)
+        if (rec%factor == 0 .and. rec%gap >= 0) call unloaded_state(op, sol)
+        call summarize_contact(op, sol%lambda, p%reconstruction%active_tol, contact, &
+                           p%obstacle%centre_of(p%mesh%lengths))
         call fill_record(rec, contact, solver, sol, p%reconstruction%kkt_tol)
+        call keep_peak(peak, rec, sol, contact, solver, seconds)
         ! 4. output of the step
         call timer_start('output')
         if (p%output%write_hdf5) call write_step_fields(p, op, sol, contact, step, comm, rank)
@@ -192,13 +210,71 @@ contains
     call log_section('Timings [s] (min / max / mean over ranks)')
     call print_timing_table(stats)
     call log_history_summary(records)
-    if (p%output%write_report .and. size(records) > 0 .and. allocated(sol%lambda)) &
-      call write_run_report(run_case_of(p), p%output, p%reconstruction, dual, solver, sol, contact, stats, &
-                                                  last_seconds, history_json(records))
+    if (peak%step == 0 .and. size(records) > 0 .and. allocated(sol%lambda)) &   ! a restart after the peak: the last step
+      call keep_peak(peak, records(size(records)), sol, contact, solver, last_seconds, always=.true.)
+    if (p%output%write_report .and. peak%step > 0) call write_peak_report(p, dual, peak, stats, records)
     if (status == 0) call log_message('feticontact: history done, every step converged, KKT check passed')
     call log_where_to_look(p%output, p%obstacle%shape == 'sphere')
     call dual%free()
   end subroutine run_load_history
+
+  !> The unloaded state (load factor 0, the obstacle not inside the body):
+  !> no load, every Dirichlet value 0 and every gap >= 0, so u = 0 and
+  !> lambda = 0 solve the contact problem exactly. The solve's round-off
+  !> would be all there is of u, and the KKT check measures displacements
+  !> relative to max |u|: the exact solution replaces it, checked by the KKT
+  !> check like any other.
+  subroutine unloaded_state(op, sol)
+    type(feti_t), intent(inout), target :: op
+    type(dual_solution_t), intent(inout) :: sol
+    integer :: ls
+    character(len=300) :: line
+    sol%lambda = 0
+    sol%alpha_bar = 0
+    do ls = 1, size(sol%u)
+      sol%u(ls)%v = 0
+    end do
+    sol%kkt = check_kkt(op, sol%u, sol%lambda)
+    write (line, '(a,es10.3)') 'unloaded state (load factor 0): the exact solution u = 0, lambda = 0; '// &
+      'KKT largest residual ', sol%kkt%worst()
+    call log_message(trim(line))
+  end subroutine unloaded_state
+
+  !> Keep the step of `rec` in `peak` when its load factor is the largest so
+  !> far (or `always`).
+  subroutine keep_peak(peak, rec, sol, contact, solver, seconds, always)
+    type(peak_step_t), intent(inout) :: peak
+    type(step_record_t), intent(in) :: rec
+    type(dual_solution_t), intent(in) :: sol
+    type(contact_summary_t), intent(in) :: contact
+    type(smalbe_t), intent(in) :: solver
+    real(dp), intent(in) :: seconds(3)
+    logical, intent(in), optional :: always
+    if (rec%factor <= peak%factor .and. .not. present(always)) return
+    peak%step = rec%step
+    peak%factor = rec%factor
+    peak%seconds = seconds
+    peak%sol = sol
+    peak%contact = contact
+    peak%solver = solver
+  end subroutine keep_peak
+
+  !> report.json of a history: the top level describes the peak step (named
+  !> in `step`, with the warnings of its solution), `history` every step.
+  subroutine write_peak_report(p, dual, peak, stats, records)
+    type(params_t), intent(in) :: p
+    type(tfeti_dualization_t), intent(inout), target :: dual
+    type(peak_step_t), intent(in) :: peak
+    type(timer_stat_t), intent(in) :: stats(:)
+    type(step_record_t), intent(in) :: records(:)
+    type(run_case_t) :: run_case
+    type(feti_t), pointer :: op
+    op => dual%operators()
+    run_case = run_case_of(p)
+    call add_validity_warnings(op, peak%sol%u, p%mesh%lengths, run_case%warnings)
+    call write_run_report(run_case, p%output, p%reconstruction, dual, peak%solver, peak%sol, peak%contact, stats, &
+                          peak%seconds, history_json(records), peak%step)
+  end subroutine write_peak_report
 
   !> The step's contact summary, solver counts and KKT outcome into its record.
   subroutine fill_record(rec, contact, solver, sol, kkt_tol)
