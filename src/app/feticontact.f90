@@ -114,5 +114,7 @@ contains
       call log_message(trim(text))
     end do
     close (u)
+    if (.not. p%boundary%top_dirichlet) call log_message('(&boundary top_displacement is not used: '// &
+      'top_dirichlet = F leaves the top face free, loaded by &load top_pressure)')
   end subroutine log_echo
 end program feticontact
