@@ -77,7 +77,7 @@ contains
     type(warm_state_t) :: warm
     type(peak_step_t) :: peak
     real(dp), allocatable :: nu(:), work(:), muhat0(:)
-    real(dp) :: seconds(3), last_seconds(3), t_start
+    real(dp) :: seconds(3), t_start
     integer(i8) :: fingerprint(2)
     integer(ip) :: step, first
     integer :: ierr, rank, nranks, stop_flag
@@ -110,7 +110,6 @@ contains
       call log_message(trim(line))
     end if
     allocate (nu(op%n_own()), work(op%n_own()))
-    last_seconds = 0
     status = 0
     call log_section('Load history')
     write (line, '(a,i0,3a,es10.3,a,l1)') 'steps ', p%history%nsteps, ', path ', trim(p%history%path), &
@@ -139,7 +138,6 @@ contains
         ! same in every step; face_recycle)
         solver%polish%face%recycle%on = p%history%warm_start .and. p%history%recycle
         nu = 0
-        ! (the unloaded state starts cold, from its exact nu = 0: unloaded_state)
         if (warm%n > 0 .and. p%history%warm_start .and. .not. (rec%factor == 0 .and. rec%gap >= 0)) then
           call warm_guess(warm, rec%factor, rec%gap, work, muhat0, rec%warm)
           call op%project(work, nu)
@@ -149,14 +147,9 @@ contains
           solver%muhat_start = muhat0
         end if
         call dual%solve_from(solver, nu, seconds)
-        last_seconds = seconds
         ! 3. the inverse: lambda, alpha_bar, u, KKT
         call dual%post_solve(nu, solver%muhat, sol)
-        if (rec%factor == 0 .and. rec%gap >= 0) call unloaded_state(op, sol)
-        call summarize_contact(op, sol%lambda, p%reconstruction%active_tol, contact, &
-                           p%obstacle%centre_of(p%mesh%lengths))
-        call fill_record(rec, contact, solver, sol, p%reconstruction%kkt_tol)
-        call keep_peak(peak, rec, sol, contact, solver, seconds)
+        call finish_step(p, op, solver, seconds, sol, contact, rec, peak)
         ! 4. output of the step
         call timer_start('output')
         if (p%output%write_hdf5) call write_step_fields(p, op, sol, contact, step, comm, rank)
@@ -210,8 +203,6 @@ contains
     call log_section('Timings [s] (min / max / mean over ranks)')
     call print_timing_table(stats)
     call log_history_summary(records)
-    if (peak%step == 0 .and. size(records) > 0 .and. allocated(sol%lambda)) &   ! a restart after the peak: the last step
-      call keep_peak(peak, records(size(records)), sol, contact, solver, last_seconds, always=.true.)
     if (p%output%write_report .and. peak%step > 0) call write_peak_report(p, dual, peak, stats, records)
     if (status == 0) call log_message('feticontact: history done, every step converged, KKT check passed')
     call log_where_to_look(p%output, p%obstacle%shape == 'sphere')
@@ -240,24 +231,30 @@ contains
     call log_message(trim(line))
   end subroutine unloaded_state
 
-  !> Keep the step of `rec` in `peak` when its load factor is the largest so
-  !> far (or `always`).
-  subroutine keep_peak(peak, rec, sol, contact, solver, seconds, always)
-    type(peak_step_t), intent(inout) :: peak
-    type(step_record_t), intent(in) :: rec
-    type(dual_solution_t), intent(in) :: sol
-    type(contact_summary_t), intent(in) :: contact
+  !> After a step's post-solve: the unloaded state's exact solution
+  !> (unloaded_state), the contact summary, the step's record, and the step
+  !> kept in `peak` when its load factor is the largest so far (a warm step
+  !> at factor 0 starts cold, from its exact nu = 0: the run's loop).
+  subroutine finish_step(p, op, solver, seconds, sol, contact, rec, peak)
+    type(params_t), intent(in) :: p
+    type(feti_t), intent(inout), target :: op
     type(smalbe_t), intent(in) :: solver
     real(dp), intent(in) :: seconds(3)
-    logical, intent(in), optional :: always
-    if (rec%factor <= peak%factor .and. .not. present(always)) return
+    type(dual_solution_t), intent(inout) :: sol
+    type(contact_summary_t), intent(out) :: contact
+    type(step_record_t), intent(inout) :: rec
+    type(peak_step_t), intent(inout) :: peak
+    if (rec%factor == 0 .and. rec%gap >= 0) call unloaded_state(op, sol)
+    call summarize_contact(op, sol%lambda, p%reconstruction%active_tol, contact, p%obstacle%centre_of(p%mesh%lengths))
+    call fill_record(rec, contact, solver, sol, p%reconstruction%kkt_tol)
+    if (rec%factor <= peak%factor) return
     peak%step = rec%step
     peak%factor = rec%factor
     peak%seconds = seconds
     peak%sol = sol
     peak%contact = contact
     peak%solver = solver
-  end subroutine keep_peak
+  end subroutine finish_step
 
   !> report.json of a history: the top level describes the peak step (named
   !> in `step`, with the warnings of its solution), `history` every step.
