@@ -268,7 +268,8 @@ def cmd_weak(args):
         ax.set_yscale("log")
         ax.set_title(family_label(name, pts), fontsize=10)
         if k == 0:
-            ax.set_ylabel("time [s] (max over ranks; %s, min-max of repetitions)" % CENTRE["stat"])
+            ax.set_ylabel("time [s] (max over ranks; the repetition with the %s total, bars: min-max)"
+                          % ("smallest" if CENTRE["stat"] == "min" else "median"), fontsize=8)
         ax.legend(fontsize=7)
     fig.suptitle("%s: time per phase" % scaling_kind(families))
     save(fig, figures_dir(args, args.campaigns[0]), args.name + "_times")
