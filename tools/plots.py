@@ -57,7 +57,7 @@ SETUP = "setup"
 PHASE_GROUPS = [
     ("set-up without the factorization (mesh, K, B, G, explicit F, GG^T)", SETUP),
     ("factorization of K^s (K^+)", ["factorization"]),
-    ("dual set-up (d, lambda~, ||PFP||)", ["dual setup"]),
+    ("dual set-up (d, lambda~, the norm of PFP)", ["dual setup"]),
     ("SMALBE/MPRGP solve", ["solve"]),
     ("reconstruction + primal", ["dual gradient", "rec new", "rec standard", "primal"]),
     ("KKT check + output", ["kkt", "output"]),
@@ -239,9 +239,10 @@ def cmd_weak(args):
                 g(p["outer_iterations"][0], "%d"), g(p["hessian_multiplications"][0], "%d"),
                 " | ".join(g(p[lbl_][0]) for lbl_, _ in PHASE_GROUPS),
                 g(None if p["peak_rss_max_bytes"][0] is None else p["peak_rss_max_bytes"][0] / 2**20, "%.0f")))
-    print("times [s]: max over ranks, of the repetition with the %s total (so the phases add up to the "
-          "total, up to the untimed rest; the '(inside the above)' columns are parts of the others)"
-          % ("smallest" if CENTRE["stat"] == "min" else "median"))
+    print("times [s]: of the repetition with the %s total (one repetition per row, not per-column "
+          "medians); each phase is its max over ranks, so the phases add up to the total only up to the "
+          "untimed rest and the ranks' imbalance (a rank's wait counts in the phase it waits in); the "
+          "'(inside the above)' columns are parts of the others" % ("smallest" if CENTRE["stat"] == "min" else "median"))
     subdomain_axis(ax, allx)
     ax.set_ylabel("count")
     ax.set_ylim(bottom=0)
@@ -307,9 +308,10 @@ def cmd_reconstruction(args):
                 g(p["rec_standard_assembly"][0]), g(p["rec_standard_factorization"][0]),
                 g(p["rec_standard_solve"][0]), g(std / new if new and std else None, "%.0f"),
                 g(p["alpha_difference"][0], "%.1e")))
-    print("times [s]: max over ranks, of the repetition with the %s total (so the phases add up to the "
-          "total, up to the untimed rest; the '(inside the above)' columns are parts of the others)"
-          % ("smallest" if CENTRE["stat"] == "min" else "median"))
+    print("times [s]: of the repetition with the %s total (one repetition per row, not per-column "
+          "medians); each phase is its max over ranks, so the phases add up to the total only up to the "
+          "untimed rest and the ranks' imbalance (a rank's wait counts in the phase it waits in); the "
+          "'(inside the above)' columns are parts of the others" % ("smallest" if CENTRE["stat"] == "min" else "median"))
     subdomain_axis(ax, allx)
     ax.set_yscale("log")
     ax.set_ylabel("seconds (max over ranks; %s, min-max of repetitions)" % CENTRE["stat"])
