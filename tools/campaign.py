@@ -440,7 +440,7 @@ def columns_for(rows):
 
 
 # A load history (&history): report.json's `history` gives one CSV row per step, the run's
-# columns kept (its report sections are those of the last step) and these added.
+# columns kept (its report sections are those of the peak step, report.json `step`) and these added.
 STEP_COLUMNS = [("step", "step"), ("step_load_factor", "load_factor"), ("step_gap", "gap"),
                 ("step_total_force", "total_force"), ("step_active_nodes", "active_nodes"),
                 ("step_contact_radius", "contact_radius"), ("step_max_pressure", "max_pressure"),

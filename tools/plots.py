@@ -51,12 +51,13 @@ SETUP_PHASES = ["mesh", "assembly", "factorization", "B and G", "explicit F", "c
                 "preconditioner setup"]
 
 # Phases shown in the weak-scaling time figure: label -> timer names summed (max over ranks);
-# SETUP: tools/campaign.py's set-up, every phase before the solve except the dual set-up.
+# SETUP: tools/campaign.py's set-up (every phase before the solve except the dual set-up) without the
+# factorization of K^s, its own row: the rows before the total are disjoint.
 SETUP = "setup"
 PHASE_GROUPS = [
-    ("set-up (mesh, K, K^+, B, G, explicit F, GG^T)", SETUP),
-    ("factorization of K^s", ["factorization"]),
-    ("dual set-up (d, lambda~, ||PFP||)", ["dual setup"]),
+    ("set-up without the factorization (mesh, K, B, G, explicit F, GG^T)", SETUP),
+    ("factorization of K^s (K^+)", ["factorization"]),
+    ("dual set-up (d, lambda~, the norm of PFP)", ["dual setup"]),
     ("SMALBE/MPRGP solve", ["solve"]),
     ("reconstruction + primal", ["dual gradient", "rec new", "rec standard", "primal"]),
     ("KKT check + output", ["kkt", "output"]),
@@ -119,9 +120,11 @@ def values(runs, col):
 
 def summed(run, phases, stat="max"):
     if phases == SETUP:
+        factorization = num(run.get(phase_column("factorization", stat))) or 0.0
         if num(run.get("setup_" + stat)) is not None:
-            return num(run.get("setup_" + stat))
-        v = [x for x in (num(run.get(phase_column(p, stat))) for p in SETUP_PHASES) if x is not None]
+            return num(run.get("setup_" + stat)) - factorization
+        v = [x for x in (num(run.get(phase_column(p, stat))) for p in SETUP_PHASES if p != "factorization")
+             if x is not None]
         return sum(v) if v else None
     v = [num(run.get(phase_column(p, stat))) for p in phases]
     return sum(v) if v and all(x is not None for x in v) else None
@@ -151,8 +154,17 @@ def family_points(rows):
                     "rec_standard_factorization", "rec_standard_solve", "kkt_max", "alpha_difference",
                     "active_contact"):
             p[col] = med_range(values(runs, col))
+        # the phases of one repetition, the one whose total is the median (--stat min: the
+        # fastest): its columns add up to its total (up to the untimed rest); the error bars
+        # span each phase's min..max over the repetitions
+        timed = [r for r in runs if summed(r, ["total"]) is not None]
+        rep = None
+        if timed:
+            ordered = sorted(timed, key=lambda r: summed(r, ["total"]))
+            rep = ordered[0] if CENTRE["stat"] == "min" else ordered[(len(ordered) - 1) // 2]
         for label, phases in PHASE_GROUPS:
-            p[label] = med_range([x for x in (summed(r, phases) for r in runs) if x is not None])
+            _, lo, hi = med_range([x for x in (summed(r, phases) for r in runs) if x is not None])
+            p[label] = (summed(rep, phases) if rep is not None else None, lo, hi)
         pts.append(p)
     pts.sort(key=lambda p: p["subdomains"])
     return pts
@@ -192,6 +204,16 @@ def g(x, f="%.3g"):
 
 
 # ---------------------------------------------------------------- (a) weak scaling
+def scaling_kind(families):
+    """'Weak scaling' when the ranks grow with the subdomains; on a fixed rank count the figure shows
+    the cost against the number of subdomains (more, smaller subdomains per rank), not weak scaling."""
+    ranks = {r["ranks"] for _, rows in families for r in ok_rows(rows)}
+    if len(ranks) == 1:
+        return "Cost against subdomains on %s rank%s (fixed ranks, not weak scaling)" % (
+            next(iter(ranks)), "" if ranks == {"1"} else "s")
+    return "Weak scaling"
+
+
 def cmd_weak(args):
     families = [load_campaign(c) for c in args.campaigns]
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
@@ -217,11 +239,14 @@ def cmd_weak(args):
                 g(p["outer_iterations"][0], "%d"), g(p["hessian_multiplications"][0], "%d"),
                 " | ".join(g(p[lbl_][0]) for lbl_, _ in PHASE_GROUPS),
                 g(None if p["peak_rss_max_bytes"][0] is None else p["peak_rss_max_bytes"][0] / 2**20, "%.0f")))
-    print("times [s]: max over ranks, %s over repetitions" % CENTRE["stat"])
+    print("times [s]: of the repetition with the %s total (one repetition per row, not per-column "
+          "medians); each phase is its max over ranks, so the phases add up to the total only up to the "
+          "untimed rest and the ranks' imbalance (a rank's wait counts in the phase it waits in); the "
+          "'(inside the above)' columns are parts of the others" % ("smallest" if CENTRE["stat"] == "min" else "median"))
     subdomain_axis(ax, allx)
     ax.set_ylabel("count")
     ax.set_ylim(bottom=0)
-    ax.set_title("Weak scaling: SMALBE outer iterations and Hessian multiplications")
+    ax.set_title("%s: SMALBE outer iterations and Hessian multiplications" % scaling_kind(families))
     ax.legend(fontsize=7)
     save(fig, figures_dir(args, args.campaigns[0]), args.name + "_iterations")
 
@@ -244,9 +269,10 @@ def cmd_weak(args):
         ax.set_yscale("log")
         ax.set_title(family_label(name, pts), fontsize=10)
         if k == 0:
-            ax.set_ylabel("time [s] (max over ranks; %s, min-max of repetitions)" % CENTRE["stat"])
+            ax.set_ylabel("time [s] (max over ranks; the repetition with the %s total, bars: min-max)"
+                          % ("smallest" if CENTRE["stat"] == "min" else "median"), fontsize=8)
         ax.legend(fontsize=7)
-    fig.suptitle("Weak scaling: time per phase")
+    fig.suptitle("%s: time per phase" % scaling_kind(families))
     save(fig, figures_dir(args, args.campaigns[0]), args.name + "_times")
 
 
@@ -282,7 +308,10 @@ def cmd_reconstruction(args):
                 g(p["rec_standard_assembly"][0]), g(p["rec_standard_factorization"][0]),
                 g(p["rec_standard_solve"][0]), g(std / new if new and std else None, "%.0f"),
                 g(p["alpha_difference"][0], "%.1e")))
-    print("times [s]: max over ranks, %s over repetitions" % CENTRE["stat"])
+    print("times [s]: of the repetition with the %s total (one repetition per row, not per-column "
+          "medians); each phase is its max over ranks, so the phases add up to the total only up to the "
+          "untimed rest and the ranks' imbalance (a rank's wait counts in the phase it waits in); the "
+          "'(inside the above)' columns are parts of the others" % ("smallest" if CENTRE["stat"] == "min" else "median"))
     subdomain_axis(ax, allx)
     ax.set_yscale("log")
     ax.set_ylabel("seconds (max over ranks; %s, min-max of repetitions)" % CENTRE["stat"])
@@ -546,7 +575,18 @@ def cmd_history(args):
     sphere = case["obstacle"]["shape"] == "sphere"
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
     order = np.arange(len(steps))
-    ax.plot(delta, force, "-o", ms=4, color="C0", label="computed: force against the top's approach (delta)")
+    # loading (the factor grows from the step before) and unloading steps marked apart, joined in order
+    loading = np.array([k == 0 or factor[k] > factor[k - 1] for k in order])
+    ax.plot(delta, force, "-", color="0.6", lw=1, zorder=1)
+    ax.plot(delta[loading], force[loading], "^", ms=6, color="C0", zorder=2,
+            label="computed, loading: force against the top's approach (delta)")
+    if (~loading).any():
+        ax.plot(delta[~loading], force[~loading], "o", ms=10, color="C3", mfc="none", zorder=3,
+                label="computed, unloading (same factors back to 0)")
+    peak = report.get("step")
+    if peak is not None and 1 <= peak <= len(steps):
+        ax.annotate("peak (step %d)" % peak, (delta[peak - 1], force[peak - 1]), textcoords="offset points",
+                    xytext=(-80, 0), fontsize=8, arrowprops={"arrowstyle": "->", "color": "0.4"})
     rows = []
     if sphere:
         young, nu, radius = case["material"]["young"], case["material"]["poisson"], case["obstacle"]["radius"]
@@ -566,32 +606,35 @@ def cmd_history(args):
         hertz = 4 / 3 * estar * math.sqrt(radius) * np.clip(d, 0, None) ** 1.5
         dd = np.linspace(0, max(d.max(), 1e-300) * 1.05, 200)
         if c != 0:
-            ax.plot(d, force, "s", ms=4, color="C1", label="computed: against the indentation d = delta - C F "
+            ax.plot(d, force, "s", ms=3, color="C1", zorder=1, label="computed: against the indentation d = delta - C F "
                     "(C = %.3g mm/N, %s)" % (c, how))
         ax.plot(dd, 4 / 3 * estar * math.sqrt(radius) * dd**1.5, "k-",
                 label="Hertz: P = 4/3 E* R^1/2 d^3/2 (E* = %.4g MPa, R = %g mm)" % (estar, radius))
         for k in order:
-            rows.append((steps[k]["step"], factor[k], delta[k], d[k], force[k], hertz[k],
-                         force[k] / hertz[k] if hertz[k] > 0 else float("nan")))
+            rows.append((steps[k]["step"], "loading" if loading[k] else "unloading", factor[k], delta[k], d[k],
+                         force[k], hertz[k], force[k] / hertz[k] if hertz[k] > 0 else float("nan")))
     ax.set_xlabel("approach / indentation [mm]")
     ax.set_ylabel("contact force [N]")
     ax.set_title("%s: force against indentation over %d steps" % (case["output"]["run_name"], len(steps)),
                  fontsize=10)
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7, loc="lower right")
     save(fig, figures_dir(args, path), args.name)
     history_costs(report, path, args.cold)
     if sphere:
-        print("C = %.4g mm/N (%s; 1/(E L_z) = %.4g)" % (c, how, 1 / (young * case["mesh"]["lengths"][2])))
-        print("| step | factor | delta [mm] | d [mm] | F [N] | Hertz P(d) [N] | F / P |")
-        print("|---:|---:|---:|---:|---:|---:|---:|")
+        lx, ly, lz = case["mesh"]["lengths"]
+        print("C = %.4g mm/N (%s; for scale, the compliance of the body as a column in uniaxial "
+              "compression, L_z / (E L_x L_y) = %.4g mm/N)" % (c, how, lz / (young * lx * ly)))
+        print("| step | path | factor | delta [mm] | d [mm] | F [N] | Hertz P(d) [N] | F / P |")
+        print("|---:|---|---:|---:|---:|---:|---:|---:|")
         for r in rows:
-            print("| %d | %.3f | %.5g | %.5g | %.5g | %.5g | %.4f |" % r)
+            print("| %d | %s | %.3f | %.5g | %.5g | %.5g | %.5g | %.4f |" % r)
     else:
-        print("| step | factor | delta [mm] | F [N] |")
-        print("|---:|---:|---:|---:|")
+        print("| step | path | factor | delta [mm] | F [N] |")
+        print("|---:|---|---:|---:|---:|")
         for k in order:
-            print("| %d | %.3f | %.5g | %.5g |" % (steps[k]["step"], factor[k], delta[k], force[k]))
+            print("| %d | %s | %.3f | %.5g | %.5g |" % (steps[k]["step"], "loading" if loading[k] else "unloading",
+                                                     factor[k], delta[k], force[k]))
 
 
 def main():
@@ -616,7 +659,8 @@ def main():
 
     sub.add_parser = add_parser
 
-    p = sub.add_parser("weak", help="(a) iterations and phase times against subdomains (weak scaling)")
+    p = sub.add_parser("weak", help="(a) iterations and phase times against subdomains (weak scaling when the "
+                                    "ranks grow with them)")
     p.add_argument("campaigns", nargs="+", help="campaign directories or CSVs, one per family")
     p.add_argument("--name", default="weak", help="file name prefix: NAME_iterations.png, NAME_times.png")
     p.set_defaults(func=cmd_weak)

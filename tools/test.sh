@@ -8,7 +8,19 @@
 #                                             label `cluster`, and the tests whose outcome does not
 #                                             depend on the build type, label `build_independent`:
 #                                             input errors, run in the Debug pass only)
+#   tools/test.sh --help                      this text (nothing is built)
 set -euo pipefail
+
+# --help / -h: the usage above, before any set-up or build
+for arg in "$@"; do
+  case "$arg" in
+    -h|--help)
+      sed -n '2,/^set -euo/p' "${BASH_SOURCE[0]}" | sed '$d' | sed 's/^# \{0,1\}//'
+      echo "ctest args: passed to ctest after the build (for example -R '<regex>', -L <label>; ctest --help)"
+      exit 0 ;;
+  esac
+done
+
 FETICONTACT_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 source "$FETICONTACT_ROOT/tools/setup.sh"
 

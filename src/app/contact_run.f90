@@ -6,7 +6,7 @@
 module contact_run
   use kinds, only: dp
   use errors, only: exit_not_converged, exit_kkt_failed
-  use logger, only: log_section, log_message
+  use logger, only: log_section, log_message, log_open_file
   use timers, only: timer_start, timer_stop, timers_reduce, timer_stat_t
   use memory_marks, only: memory_mark
   use params, only: params_t, feti_settings_of
@@ -15,6 +15,8 @@ module contact_run
   use tfeti_dualization, only: tfeti_dualization_t, dual_solution_t
   use feti_operators, only: feti_t
   use contact_summary, only: contact_summary_t, summarize_contact
+  use model_validity, only: add_validity_warnings
+  use run_report, only: run_case_t
   use run_checks, only: check_run
   use decomposition, only: decomposition_t
   use field_output, only: write_run_fields
@@ -43,6 +45,7 @@ contains
     type(smalbe_t) :: solver
     type(dual_solution_t) :: sol
     type(contact_summary_t) :: contact
+    type(run_case_t) :: run_case
     type(timer_stat_t), allocatable :: stats(:)
     real(dp), allocatable :: nu(:)
     real(dp) :: seconds(3)
@@ -52,6 +55,8 @@ contains
 
     ! what --check checks: output folder, ranks, coarse groups; memory estimate; the decomposition
     call check_run(p, comm, units)
+    ! the log so far and from now on also in <run_name>.log beside report.json
+    if (p%output%write_report) call log_open_file(trim(p%output%directory)//'/'//trim(p%output%run_name)//'.log')
     if (p%history%is_history()) then
       ! &history: one set-up, a solve per step (load_history)
       call run_load_history(p, comm, status, units)
@@ -73,7 +78,10 @@ contains
     ! 4. report: contact summary, fields, timings, report.json
     call timer_start('output')
     op => dual%operators()
-    call summarize_contact(op, sol%lambda, p%reconstruction%active_tol, contact)
+    call summarize_contact(op, sol%lambda, p%reconstruction%active_tol, contact, &
+                           p%obstacle%centre_of(p%mesh%lengths))
+    run_case = run_case_of(p)
+    call add_validity_warnings(op, sol%u, p%mesh%lengths, run_case%warnings)
     if (p%output%write_hdf5) call write_run_fields(op, sol%u, contact, p%output%directory, &
                                                    p%output%run_name)
     call timer_stop('output')
@@ -86,7 +94,7 @@ contains
     call timers_reduce(comm, stats)
     call log_section('Timings [s] (min / max / mean over ranks)')
     call print_timing_table(stats)
-    if (p%output%write_report) call write_run_report(run_case_of(p), p%output, p%reconstruction, &
+    if (p%output%write_report) call write_run_report(run_case, p%output, p%reconstruction, &
                                                         dual, solver, sol, contact, stats, seconds)
 
     status = 0

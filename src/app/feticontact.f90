@@ -73,7 +73,7 @@ program feticontact
   call log_message('feticontact '//fc_version//' (commit '//fc_commit//')')
   call read_params(file, MPI_COMM_WORLD, p)
   call log_section('feticontact: settings used')
-  if (log_is_root()) call echo_params(p, output_unit)
+  call log_echo(p)
   if (p%mesh%cluster_auto) then
     write (line, '(a,3(1x,i0),a)') '&mesh cluster (automatic):', p%mesh%cluster, ' -- '//trim(p%mesh%cluster_choice)
     call log_message(line)
@@ -86,9 +86,35 @@ program feticontact
 
   if (.not. check_only) call run_contact_case(p, MPI_COMM_WORLD, status)
   if (check_only) then
-    call check_run(p, MPI_COMM_WORLD)
+    call check_run(p, MPI_COMM_WORLD, dry_run=.true.)
     call log_message('input checked: OK')
   end if
   call MPI_Finalize(ierr)
   if (status /= 0) call exit_process(status)
+
+contains
+
+  !> The settings echo (echo_params) through the logger: on the screen and in
+  !> the log file the run writes beside report.json.
+  subroutine log_echo(p)
+    type(params_t), intent(in) :: p
+    integer :: u, ios
+    character(len=4096) :: text
+    if (.not. log_is_root()) return
+    open (newunit=u, status='scratch', action='readwrite', form='formatted', iostat=ios)
+    if (ios /= 0) then
+      call echo_params(p, output_unit)
+      return
+    end if
+    call echo_params(p, u)
+    rewind (u)
+    do
+      read (u, '(a)', iostat=ios) text
+      if (ios /= 0) exit
+      call log_message(trim(text))
+    end do
+    close (u)
+    if (.not. p%boundary%top_dirichlet) call log_message('(&boundary top_displacement is not used: '// &
+      'top_dirichlet = F leaves the top face free, loaded by &load top_pressure)')
+  end subroutine log_echo
 end program feticontact

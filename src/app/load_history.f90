@@ -27,7 +27,9 @@ module load_history
   use hdf5_output, only: check_output_directory
   use field_output, only: write_run_fields
   use xdmf, only: write_xdmf_series
-  use run_report, only: write_run_report, log_where_to_look
+  use run_report, only: write_run_report, log_where_to_look, run_case_t
+  use model_validity, only: add_validity_warnings
+  use kkt, only: check_kkt
   use report, only: print_timing_table
   use json_writer, only: json_writer_t
   use history_checkpoint, only: step_record_t, checkpoint_t, warm_state_t, write_checkpoint, read_checkpoint, &
@@ -40,6 +42,17 @@ module load_history
   private
 
   public :: run_load_history
+
+  !> The step report.json's top level describes: the peak (the largest load
+  !> factor, the first of equal ones), its solution, contact and solver.
+  type :: peak_step_t
+    integer(ip) :: step = 0
+    real(dp) :: factor = -huge(1.0_dp)
+    real(dp) :: seconds(3) = 0
+    type(dual_solution_t) :: sol
+    type(contact_summary_t) :: contact
+    type(smalbe_t) :: solver
+  end type peak_step_t
 
   !> What a history run keeps from its set-up to its end.
   type :: history_run_t
@@ -54,7 +67,7 @@ module load_history
     type(step_record_t), allocatable :: records(:)
     type(warm_state_t) :: warm                  !< the last solutions, for the next start
     real(dp), allocatable :: nu(:), work(:)
-    real(dp) :: last_seconds(3) = 0             !< the last step's solve seconds (report.json)
+    type(peak_step_t) :: peak                   !< the step report.json's top level describes
     real(dp) :: t_start = 0
     integer(i8) :: fingerprint(2) = 0
   end type history_run_t
@@ -62,6 +75,7 @@ module load_history
   !> How a step's solve started (step_record_t%warm)
   character(len=12), parameter :: start_names(0:3) = [character(len=12) :: 'cold', 'previous', 'scaled', &
                                                        'extrapolated']
+
 
 contains
 
@@ -131,7 +145,6 @@ contains
       call log_message(trim(line))
     end if
     allocate (h%nu(h%op%n_own()), h%work(h%op%n_own()))
-    h%last_seconds = 0
     call log_section('Load history')
     write (line, '(a,i0,3a,es10.3,a,l1)') 'steps ', p%history%nsteps, ', path ', trim(p%history%path), &
       ', factor_peak ', p%history%factor_peak, ', warm start ', p%history%warm_start
@@ -167,7 +180,8 @@ contains
     ! same in every step; face_recycle)
     call h%solver%recycle_directions(p%history%warm_start .and. p%history%recycle)
     h%nu = 0
-    if (h%warm%n > 0 .and. p%history%warm_start) then
+    ! the unloaded state starts cold, from its exact nu = 0 (finish_step)
+    if (h%warm%n > 0 .and. p%history%warm_start .and. .not. (rec%factor == 0 .and. rec%gap >= 0)) then
       call warm_guess(h%warm, rec%factor, rec%gap, h%work, muhat0, rec%warm)
       call h%op%project(h%work, h%nu)
       ! contact rows without force in the guess exactly at their bound (lambda = 0), not a
@@ -176,11 +190,9 @@ contains
       call h%solver%warm_start(muhat0)
     end if
     call h%dual%solve_from(h%solver, h%nu, seconds)
-    h%last_seconds = seconds
     ! 3. the inverse: lambda, alpha_bar, u, KKT
     call h%dual%post_solve(h%nu, h%solver%muhat, h%sol)
-    call summarize_contact(h%op, h%sol%lambda, p%reconstruction%active_tol, h%contact)
-    call fill_record(rec, h%contact, h%solver, h%sol, p%reconstruction%kkt_tol)
+    call finish_step(p, h%op, h%solver, seconds, h%sol, h%contact, rec, h%peak)
     ! 4. output of the step
     call timer_start('output')
     if (p%output%write_hdf5) call write_step_fields(p, h%op, h%sol, h%contact, step, h%comm, h%rank)
@@ -246,7 +258,7 @@ contains
   end function stopped_after
 
   !> The end of a history: the timing table, the summary, report.json (the
-  !> last step's solve and solution with every step's record).
+  !> peak step's solve and solution with every step's record).
   subroutine finish_history(p, h, status)
     type(params_t), intent(in) :: p
     type(history_run_t), intent(inout), target :: h
@@ -256,13 +268,75 @@ contains
     call log_section('Timings [s] (min / max / mean over ranks)')
     call print_timing_table(stats)
     call log_history_summary(h%records)
-    if (p%output%write_report .and. size(h%records) > 0 .and. allocated(h%sol%lambda)) &
-      call write_run_report(run_case_of(p), p%output, p%reconstruction, h%dual, h%solver, h%sol, h%contact, &
-                            stats, h%last_seconds, history_json(h%records))
+    if (p%output%write_report .and. h%peak%step > 0) call write_peak_report(p, h%dual, h%peak, stats, h%records)
     if (status == 0) call log_message('feticontact: history done, every step converged, KKT check passed')
     call log_where_to_look(p%output, p%obstacle%shape == 'sphere')
     call h%dual%free()
   end subroutine finish_history
+
+  !> The unloaded state (load factor 0, the obstacle not inside the body):
+  !> no load, every Dirichlet value 0 and every gap >= 0, so u = 0 and
+  !> lambda = 0 solve the contact problem exactly. The solve's round-off
+  !> would be all there is of u, and the KKT check measures displacements
+  !> relative to max |u|: the exact solution replaces it, checked by the KKT
+  !> check like any other.
+  subroutine unloaded_state(op, sol)
+    type(feti_t), intent(inout), target :: op
+    type(dual_solution_t), intent(inout) :: sol
+    integer :: ls
+    character(len=300) :: line
+    sol%lambda = 0
+    sol%alpha_bar = 0
+    do ls = 1, size(sol%u)
+      sol%u(ls)%v = 0
+    end do
+    sol%kkt = check_kkt(op, sol%u, sol%lambda)
+    write (line, '(a,es10.3)') 'unloaded state (load factor 0): the exact solution u = 0, lambda = 0; '// &
+      'KKT largest residual ', sol%kkt%worst()
+    call log_message(trim(line))
+  end subroutine unloaded_state
+
+  !> After a step's post-solve: the unloaded state's exact solution
+  !> (unloaded_state), the contact summary, the step's record, and the step
+  !> kept in `peak` when its load factor is the largest so far (a warm step
+  !> at factor 0 starts cold, from its exact nu = 0: the run's loop).
+  subroutine finish_step(p, op, solver, seconds, sol, contact, rec, peak)
+    type(params_t), intent(in) :: p
+    type(feti_t), intent(inout), target :: op
+    type(smalbe_t), intent(inout) :: solver
+    real(dp), intent(in) :: seconds(3)
+    type(dual_solution_t), intent(inout) :: sol
+    type(contact_summary_t), intent(out) :: contact
+    type(step_record_t), intent(inout) :: rec
+    type(peak_step_t), intent(inout) :: peak
+    if (rec%factor == 0 .and. rec%gap >= 0) call unloaded_state(op, sol)
+    call summarize_contact(op, sol%lambda, p%reconstruction%active_tol, contact, p%obstacle%centre_of(p%mesh%lengths))
+    call fill_record(rec, contact, solver, sol, p%reconstruction%kkt_tol)
+    if (rec%factor <= peak%factor) return
+    peak%step = rec%step
+    peak%factor = rec%factor
+    peak%seconds = seconds
+    peak%sol = sol
+    peak%contact = contact
+    call solver%report_copy(peak%solver)
+  end subroutine finish_step
+
+  !> report.json of a history: the top level describes the peak step (named
+  !> in `step`, with the warnings of its solution), `history` every step.
+  subroutine write_peak_report(p, dual, peak, stats, records)
+    type(params_t), intent(in) :: p
+    type(tfeti_dualization_t), intent(inout), target :: dual
+    type(peak_step_t), intent(in) :: peak
+    type(timer_stat_t), intent(in) :: stats(:)
+    type(step_record_t), intent(in) :: records(:)
+    type(run_case_t) :: run_case
+    type(feti_t), pointer :: op
+    op => dual%operators()
+    run_case = run_case_of(p)
+    call add_validity_warnings(op, peak%sol%u, p%mesh%lengths, run_case%warnings)
+    call write_run_report(run_case, p%output, p%reconstruction, dual, peak%solver, peak%sol, peak%contact, stats, &
+                          peak%seconds, history_json(records), peak%step)
+  end subroutine write_peak_report
 
   !> The step's contact summary, solver counts and KKT outcome into its record.
   subroutine fill_record(rec, contact, solver, sol, kkt_tol)

@@ -19,6 +19,7 @@ module run_checks
   use orthonormal_coarse, only: check_orthonormal_size
   use hdf5_output, only: check_output_directory
   use proc_status, only: meminfo_bytes
+  use rigid_hold, only: held_modes
   use mpi_f08, only: MPI_Comm, MPI_Comm_size, MPI_Comm_rank, MPI_Comm_split_type, MPI_Comm_free, &
                      MPI_COMM_TYPE_SHARED, MPI_INFO_NULL, MPI_Allreduce, MPI_Bcast, MPI_MAXLOC, &
                      MPI_2DOUBLE_PRECISION, MPI_DOUBLE_PRECISION
@@ -39,17 +40,19 @@ contains
   !> Every check of `p` on `comm` that a run makes before its set-up work;
   !> the memory estimate logged. `units`: the decomposition into the FETI
   !> units (subdomains, or clusters with hybrid TFETI), for the set-up.
-  !> Collective.
-  subroutine check_run(p, comm, units)
+  !> `dry_run` (`--check`): create and write nothing. Collective.
+  subroutine check_run(p, comm, units, dry_run)
     type(params_t), intent(in) :: p
     type(MPI_Comm), intent(in) :: comm
     type(decomposition_t), intent(out), optional :: units
+    logical, intent(in), optional :: dry_run
     type(decomposition_t) :: dec
     type(coarse_plan_t) :: plan
     integer :: nranks, ierr
 
     call MPI_Comm_size(comm, nranks, ierr)
-    if (p%output%write_hdf5 .or. p%output%write_report) call check_output_directory(comm, p%output%directory)
+    call check_held(p, comm)
+    if (p%output%write_hdf5 .or. p%output%write_report) call check_output_directory(comm, p%output%directory, dry_run)
     call decompose(p, comm, dec)
     plan = plan_coarse(p%solver%coarse, nranks, dec%nsubdomains, ranks_per_node(comm))
     if (len_trim(plan%refusal) > 0) call collective_error(plan%refusal, comm, exit_input_error)
@@ -110,6 +113,26 @@ contains
       ' in /proc/meminfo); lower nsub or nel, or run on more nodes with fewer ranks on each'
     call collective_error(msg, comm, exit_input_error)
   end subroutine refuse_above_memory
+
+  !> Refuse a body that the Dirichlet, symmetry and contact rows together do
+  !> not hold against every rigid motion (rigid_hold: its coarse problem
+  !> would be singular). Collective; every rank computes the same.
+  subroutine check_held(p, comm)
+    type(params_t), intent(in) :: p
+    type(MPI_Comm), intent(in) :: comm
+    integer :: nheld
+    integer(ip) :: nodes
+    character(len=600) :: msg
+    call held_modes(p%mesh, p%boundary, p%obstacle, nheld, nodes)
+    if (nheld == 6) return
+    write (msg, '(a,i0,a,i0,a,es10.3,a)') 'file '//trim(p%file)//', group &obstacle, variable shape: '// &
+      'the body is held only by the contact, and the contact cannot hold it: ', nodes, &
+      ' bottom node(s) lie over the obstacle, which with the Dirichlet and symmetry rows leave ', &
+      6 - nheld, ' rigid motion(s) free (radius = ', p%obstacle%radius, &
+      '): enlarge &obstacle radius, refine &mesh nel, move &obstacle axis under the nodes, or set '// &
+      '&boundary top_dirichlet = .true.'
+    call collective_error(msg, comm, exit_input_error)
+  end subroutine check_held
 
   !> Log the memory estimate of the run (memory_estimate_bytes).
   subroutine log_memory_estimate(p, nranks, nunits, plan)

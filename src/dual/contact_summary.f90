@@ -3,7 +3,7 @@
 !> the total force, the largest pressure, the active nodes (contact rows with
 !> a force above &reconstruction active_tol times the largest, the same rows
 !> as the standard reconstruction's active set) and the contact radius (the
-!> farthest active node from the axis x = y = lengths/2).
+!> farthest active node from the obstacle's axis, by default x = y = lengths/2).
 module contact_summary
   use kinds, only: dp, ip, MPI_REAL_DP
   use box_mesh, only: box_mesh_t
@@ -23,21 +23,26 @@ module contact_summary
 
 contains
 
-  !> The summary of the multipliers `lambda` of `op`. Collective.
-  subroutine summarize_contact(op, lambda, active_tol, summary)
+  !> The summary of the multipliers `lambda` of `op`; `axis`: the obstacle's
+  !> axis (x, y) the contact radius is measured from (default the face
+  !> centre). Collective.
+  subroutine summarize_contact(op, lambda, active_tol, summary, axis)
     type(feti_t), intent(inout) :: op
     real(dp), intent(in) :: lambda(:)
     real(dp), intent(in) :: active_tol
     type(contact_summary_t), intent(out) :: summary
+    real(dp), intent(in), optional :: axis(2)
     type(box_mesh_t) :: mesh
     logical, allocatable :: contact(:), active(:)
     real(dp), allocatable :: force(:), x(:, :)
     integer(ip), allocatable :: gid(:)
-    real(dp) :: mine(3), total(3), area
+    real(dp) :: mine(3), total(3), area, c(2)
     integer(ip) :: i, ijk(3)
     integer :: ierr
 
     mesh = op%mesh()
+    c = mesh%lengths(1:2)/2
+    if (present(axis)) c = axis
     contact = op%is_contact()
     force = op%force_scale()*lambda
     gid = op%row_node_gid()
@@ -55,7 +60,7 @@ contains
       summary%pressure(i) = force(i)/area
       mine(1) = mine(1) + force(i)
       mine(2) = max(mine(2), summary%pressure(i))
-      if (active(i)) mine(3) = max(mine(3), sqrt((x(1, i) - mesh%lengths(1)/2)**2 + (x(2, i) - mesh%lengths(2)/2)**2))
+      if (active(i)) mine(3) = max(mine(3), sqrt((x(1, i) - c(1))**2 + (x(2, i) - c(2))**2))
     end do
     call MPI_Allreduce(mine(1), total(1), 1, MPI_REAL_DP, MPI_SUM, op%comm(), ierr)
     call MPI_Allreduce(mine(2:3), total(2:3), 2, MPI_REAL_DP, MPI_MAX, op%comm(), ierr)

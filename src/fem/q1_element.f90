@@ -12,7 +12,7 @@ module q1_element
   private
 
   public :: elasticity_matrix, q1_shape, q1_gradients, q1_stiffness, q1_face_shape_integrals, &
-            q1_face_load, q1_centroid_stress, von_mises
+            q1_face_load, q1_centroid_stress, q1_centroid_strain, von_mises
 
   !> Local nodes of the 6 element faces, ordered around each face; faces in the
   !> order of box_mesh: x0, x1, y0, y1, z0, z1 (z0 = nodes 1..4, z1 = 5..8).
@@ -206,6 +206,17 @@ contains
     call strain_matrix(g, b)
     sigma = matmul(elasticity_matrix(young, poisson), matmul(b, u))
   end subroutine q1_centroid_stress
+
+  !> Strain eps(6) (Voigt order, engineering shear strains) at the centroid of
+  !> the element with node coordinates x(3,8) and displacements u(24).
+  subroutine q1_centroid_strain(x, u, eps)
+    real(dp), intent(in) :: x(3, 8), u(24)
+    real(dp), intent(out) :: eps(6)
+    real(dp) :: g(8, 3), b(6, 24), detj
+    call q1_gradients(x, [0.0_dp, 0.0_dp, 0.0_dp], g, detj)
+    call strain_matrix(g, b)
+    eps = matmul(b, u)
+  end subroutine q1_centroid_strain
 
   !> Von Mises equivalent stress of sigma(6) (Voigt order).
   pure real(dp) function von_mises(sigma)

@@ -413,7 +413,7 @@ contains
     real(dp), intent(in) :: x(3)
     logical, intent(out) :: dirichlet(3), contact
     real(dp), intent(out) :: value(3), gap
-    real(dp) :: r2, psi, lx, ly
+    real(dp) :: r2, psi, c(2)
 
     dirichlet = .false.
     value = 0
@@ -426,14 +426,13 @@ contains
     contact = .false.
     gap = 0
     if (ijk(3) /= 0 .or. dirichlet(3)) return
-    lx = dec%mesh%lengths(1)
-    ly = dec%mesh%lengths(2)
+    c = settings%obstacle%centre_of(dec%mesh%lengths)
     select case (settings%obstacle%shape)
     case ('plane')
       contact = .true.
       psi = -settings%obstacle%gap
     case ('sphere')
-      r2 = (x(1) - lx/2)**2 + (x(2) - ly/2)**2
+      r2 = (x(1) - c(1))**2 + (x(2) - c(2))**2
       if (r2 > settings%obstacle%radius**2) return
       contact = .true.
       psi = -settings%obstacle%radius - settings%obstacle%gap + sqrt(settings%obstacle%radius**2 - r2)

@@ -1,7 +1,8 @@
 !> The settings of the rigid obstacle (`&obstacle`, docs/INPUT.md): its
-!> shape, radius and initial gap, the one home of their defaults, ranges and
-!> namelist variables (the gap against the body's height is params'
-!> check_params). Used by constraints (the contact rows of B and the gaps).
+!> shape, radius, initial gap and the position of its axis, the one home of
+!> their defaults, ranges and namelist variables (the gap against the body's
+!> height and the axis against the symmetry planes are params' checks).
+!> Used by constraints (the contact rows of B and the gaps).
 module obstacle_settings
   use kinds, only: dp, name_len
   use text, only: lower_case, reals_text
@@ -9,16 +10,23 @@ module obstacle_settings
   implicit none
   private
 
+  !> &obstacle axis not given: the face centre, resolved at start (centre_of)
+  real(dp), parameter, public :: unset_axis = -huge(1.0_dp)
+
   type, extends(settings_t), public :: obstacle_settings_t
     character(len=name_len) :: shape = 'sphere'  !< 'sphere' | 'plane' | 'none'
     real(dp) :: radius = 1  !< sphere radius [mm]
     real(dp) :: gap = 0  !< initial gap below z = 0 [mm]
+    !> the sphere's axis (x, y) in the bottom plane [mm]; unset_axis: the face centre (Lx/2, Ly/2)
+    real(dp) :: axis(2) = unset_axis
+    logical :: mirror_images = .false.  !< symmetry planes off the axis model mirror images of the obstacle
   contains
     procedure :: check => obstacle_settings_check
     procedure :: group => obstacle_settings_group
     procedure :: variables => obstacle_settings_variables
     procedure :: read_namelist => obstacle_settings_read
     procedure :: write_namelist => obstacle_settings_write
+    procedure :: centre_of => obstacle_centre_of
   end type obstacle_settings_t
 
 contains
@@ -49,7 +57,7 @@ contains
   subroutine obstacle_settings_variables(self, names)
     class(obstacle_settings_t), intent(in) :: self
     character(len=name_len), allocatable, intent(out) :: names(:)
-    names = [character(len=name_len) :: 'shape', 'radius', 'gap']
+    names = [character(len=name_len) :: 'shape', 'radius', 'gap', 'axis', 'mirror_images']
   end subroutine obstacle_settings_variables
 
   !> Read this component's variables from the group text `group`
@@ -60,12 +68,15 @@ contains
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
     character(len=name_len) :: shape
-    real(dp) :: radius, gap
-    namelist /obstacle/ shape, radius, gap
+    real(dp) :: radius, gap, axis(2)
+    logical :: mirror_images
+    namelist /obstacle/ shape, radius, gap, axis, mirror_images
     shape = self%shape; radius = self%radius; gap = self%gap
+    axis = self%axis; mirror_images = self%mirror_images
     read (group, nml=obstacle, iostat=status, iomsg=msg)
     if (status /= 0) return
     self%shape = lower_case(shape); self%radius = radius; self%gap = gap
+    self%axis = axis; self%mirror_images = mirror_images
   end subroutine obstacle_settings_read
 
   !> Write this component's variables as the namelist '&obstacle ... /' (strings quoted).
@@ -75,10 +86,25 @@ contains
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
     character(len=name_len) :: shape
-    real(dp) :: radius, gap
-    namelist /obstacle/ shape, radius, gap
+    real(dp) :: radius, gap, axis(2)
+    logical :: mirror_images
+    namelist /obstacle/ shape, radius, gap, axis, mirror_images
     shape = self%shape; radius = self%radius; gap = self%gap
+    axis = self%axis; mirror_images = self%mirror_images
     lines = ''
     write (lines, nml=obstacle, delim='quote', iostat=status, iomsg=msg)
   end subroutine obstacle_settings_write
+
+  !> The sphere's axis (x, y) in the bottom plane of a body of `lengths`:
+  !> `axis`, or the face centre when it is not given.
+  pure function obstacle_centre_of(self, lengths) result(c)
+    class(obstacle_settings_t), intent(in) :: self
+    real(dp), intent(in) :: lengths(3)
+    real(dp) :: c(2)
+    if (any(self%axis == unset_axis)) then
+      c = lengths(1:2)/2
+    else
+      c = self%axis
+    end if
+  end function obstacle_centre_of
 end module obstacle_settings

@@ -22,7 +22,8 @@ module history_settings
     logical :: given = .false.                  !< the input has the group (not a namelist variable)
     integer(ip) :: nsteps = 1                   !< steps of the history
     !> load factors: 'ramp' (factor_peak i/nsteps), 'load_unload' (up to
-    !> factor_peak in (nsteps+1)/2 steps, then down) or 'list' (load_factors)
+    !> factor_peak in nsteps/2 steps, then down through the same factors to 0)
+    !> or 'list' (load_factors)
     character(len=name_len) :: path = 'ramp'
     real(dp) :: factor_peak = 1                 !< the largest factor of 'ramp' and 'load_unload'
     real(dp) :: load_factors(max_steps) = unset !< 'list': the factor of each step
@@ -72,9 +73,9 @@ contains
     else if (self%path == 'list' .and. any(self%load_factors(n + 1:) /= unset)) then
       call refuse('load_factors', 'has more values than nsteps', int_text(count(self%load_factors /= unset)) &
                //' values for nsteps = '//int_text(n), variable, rule, got)
-    else if (self%path == 'list' .and. .not. all(self%load_factors(1:n) > 0)) then
-      call refuse('load_factors', 'each factor must be > 0', real_text(minval(self%load_factors(1:n))), &
-                   variable, rule, got)
+    else if (self%path == 'list' .and. .not. all(self%load_factors(1:n) >= 0)) then
+      call refuse('load_factors', 'each factor must be >= 0 (0: the unloaded state)', &
+                   real_text(minval(self%load_factors(1:n))), variable, rule, got)
     else if (any(self%gaps /= unset) .and. &
              (any(self%gaps(1:n) == unset) .or. any(self%gaps(n + 1:) /= unset))) then
       call refuse('gaps', 'needs exactly nsteps values when given', int_text(count(self%gaps /= unset)) &
@@ -98,16 +99,19 @@ contains
   real(dp) function history_factor(self, i)
     class(history_settings_t), intent(in) :: self
     integer(ip), intent(in) :: i
-    integer(ip) :: up
+    integer(ip) :: up, k
     select case (self%path)
     case ('list')
       history_factor = self%load_factors(i)
     case ('load_unload')
-      up = (self%nsteps + 1)/2
-      if (i <= up) then
-        history_factor = self%factor_peak*real(i, dp)/up
+      ! up steps to the peak and back down through the same factors to 0; an odd
+      ! nsteps starts from the unloaded state (factor 0) as well
+      up = self%nsteps/2
+      k = i - mod(self%nsteps, 2_ip)
+      if (up == 0) then
+        history_factor = self%factor_peak
       else
-        history_factor = self%factor_peak*real(self%nsteps + 1 - i, dp)/(self%nsteps + 1 - up)
+        history_factor = self%factor_peak*real(min(k, 2*up - k), dp)/up
       end if
     case default
       history_factor = self%factor_peak*real(i, dp)/self%nsteps

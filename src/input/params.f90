@@ -135,6 +135,7 @@ contains
     p = params_t()
     call read_text(file, text, p, status, msg)
     if (status == 0) call check_params(p, status, msg)
+    if (status == 0) p%obstacle%axis = p%obstacle%centre_of(p%mesh%lengths)   ! echoed resolved
     if (status == 0) then
       call resolve_cluster(p, nranks)
       call check_params(p, status, msg)     ! (the automatic choice meets every check by construction)
@@ -487,7 +488,7 @@ contains
         i = index(piece, '=')
         variable = lower(trim(adjustl(piece(1:i - 1))))
         msg = 'variable '//variable//': '//describe(msg2, variable, is_string(variable))// &
-              ' (in "'//trim(adjustl(piece))//'")'
+              did_you_mean(p, name, variable, msg2)//' (in "'//trim(adjustl(piece))//'")'
         return
       end if
     end do
@@ -505,6 +506,48 @@ contains
       end do
     end function is_string
   end subroutine read_group_checked
+
+  !> For a variable that is not one of group `name` (the namelist message
+  !> `iomsg` says so): '; did you mean <v>?' with the group's variable
+  !> nearest in spelling (at most 2 edits, or one starts with the other),
+  !> else ''.
+  function did_you_mean(p, name, variable, iomsg) result(text)
+    type(params_t), intent(in) :: p
+    character(len=*), intent(in) :: name, variable, iomsg
+    character(len=:), allocatable :: text, given
+    type(param_item_t), allocatable :: items(:)
+    integer :: j, d, best
+    text = ''
+    if (index(iomsg, 'Cannot match namelist object name') == 0) return
+    given = variable
+    if (index(given, '(') > 0) given = given(1:index(given, '(') - 1)
+    call param_items(p, name, items)
+    best = 3
+    do j = 1, size(items)
+      d = edit_distance(given, trim(items(j)%name))
+      if (len(given) >= 3 .and. (index(trim(items(j)%name), given) == 1 .or. &
+                                  index(given, trim(items(j)%name)) == 1)) d = min(d, 2)
+      if (d < best) then
+        best = d
+        text = '; did you mean '//trim(items(j)%name)//'?'
+      end if
+    end do
+  contains
+    !> Levenshtein distance of a and b.
+    pure integer function edit_distance(a, b) result(dist)
+      character(len=*), intent(in) :: a, b
+      integer :: row(0:len(b)), prev(0:len(b)), i, k
+      prev = [(k, k = 0, len(b))]
+      do i = 1, len(a)
+        row(0) = i
+        do k = 1, len(b)
+          row(k) = min(prev(k) + 1, row(k - 1) + 1, prev(k - 1) + merge(0, 1, a(i:i) == b(k:k)))
+        end do
+        prev = row
+      end do
+      dist = prev(len(b))
+    end function edit_distance
+  end function did_you_mean
 
   !> Turn a compiler's namelist message about `variable` into one for a user.
   !> `string`: the variable holds a string (an unquoted word then gets the hint on quotes).
@@ -806,6 +849,7 @@ contains
                     'its height &mesh lengths(3) at any step', reals([minval(step_gaps)]))
       end associate
     end if
+    if (status == 0) call check_obstacle_axis(p, status, msg)
 
   contains
 
@@ -817,6 +861,32 @@ contains
     end subroutine fail
   end subroutine check_across_groups
 
+  !> A symmetry plane must contain the sphere's axis (&obstacle axis): a plane
+  !> off the axis models the mirror image of the obstacle on its other side,
+  !> which only &obstacle mirror_images = .true. accepts.
+  subroutine check_obstacle_axis(p, status, msg)
+    type(params_t), intent(in) :: p
+    integer, intent(inout) :: status
+    character(len=*), intent(inout) :: msg
+    real(dp) :: c(2)
+    integer :: d
+    character(len=*), parameter :: plane(2) = ['symmetry_x0', 'symmetry_y0'], xy(2) = ['x', 'y']
+    logical :: on(2)
+    if (p%obstacle%shape /= 'sphere' .or. p%obstacle%mirror_images) return
+    c = p%obstacle%centre_of(p%mesh%lengths)
+    on = [p%boundary%symmetry_x0, p%boundary%symmetry_y0]
+    do d = 1, 2
+      if (.not. on(d) .or. c(d) == 0) cycle
+      status = 1
+      write (msg, '(a,i0,a,es10.3,a)') 'file '//trim(p%file)//', group &boundary, variable '//plane(d)// &
+        ': the symmetry plane '//xy(d)//' = 0 does not contain the obstacle''s axis (&obstacle axis(', d, &
+        ') = ', c(d), '; the default is the face centre): put the sphere on the plane (&obstacle axis('// &
+        achar(48 + d)//') = 0.0) or, if mirror images of the obstacle are meant, set &obstacle '// &
+        'mirror_images = .true.'
+      return
+    end do
+  end subroutine check_obstacle_axis
+
   !> Settings that are valid but probably not what was meant: each a sentence
   !> naming the group and the variable (the log and report.json's `warnings`).
   function input_warnings(p) result(w)
@@ -826,7 +896,12 @@ contains
     allocate (w(0))
     associate (o => p%obstacle, b => p%boundary)
       ! the face z = 0 moves down by at most -uz of the prescribed top (the body only shortens)
-      if (o%shape /= 'none' .and. b%top_dirichlet .and. o%gap > -b%top_displacement(3)) then
+      if (o%shape /= 'none' .and. b%top_dirichlet .and. b%top_displacement(3) > 0) then
+        write (line, '(a,sp,es10.3,a)') '&boundary top_displacement(3) = ', b%top_displacement(3), &
+          ' moves the top face upward, away from the obstacle: a sign error? (pressing the body onto '// &
+          'the obstacle needs a negative value, e.g. -0.005)'
+        w = [character(len=msg_len) :: w, line]
+      else if (o%shape /= 'none' .and. b%top_dirichlet .and. o%gap > -b%top_displacement(3)) then
         write (line, '(a,es10.3,a,es10.3,a)') '&obstacle gap = ', o%gap, &
           ' is larger than what &boundary top_displacement(3) = ', b%top_displacement(3), &
           ' can close: the body never touches the obstacle (no contact)'

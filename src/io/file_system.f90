@@ -8,9 +8,10 @@ module file_system
   implicit none
   private
 
-  public :: is_directory, path_exists, make_directories, rename_file, process_id, absolute_path
+  public :: is_directory, path_exists, make_directories, rename_file, process_id, absolute_path, could_create
 
   integer(c_int), parameter :: f_ok = 0                !< access(): existence test
+  integer(c_int), parameter :: wx_ok = 3               !< access(): write and search permission
   integer(c_int), parameter :: mode_all = 511_c_int    !< 0777, reduced by the umask
 
   interface
@@ -55,6 +56,35 @@ contains
     character(len=*), intent(in) :: path
     is_directory = c_access(trim(path)//'/.'//c_null_char, f_ok) == 0
   end function is_directory
+
+  !> Whether make_directories(path) would succeed and the directory be
+  !> writable, without creating anything (`--check`): the deepest existing
+  !> prefix of `path` must be a writable directory. `reason` says why not.
+  subroutine could_create(path, status, reason)
+    character(len=*), intent(in) :: path
+    integer, intent(out) :: status
+    character(len=:), allocatable, intent(out) :: reason
+    character(len=:), allocatable :: prefix
+    integer :: n
+    status = 0
+    reason = ''
+    prefix = trim(path)
+    do while (len(prefix) > 0 .and. .not. path_exists(prefix))
+      n = index(prefix, '/', back=.true.)
+      if (n <= 1) then
+        prefix = merge('/', '.', n == 1)
+        exit
+      end if
+      prefix = prefix(1:n - 1)
+    end do
+    if (.not. is_directory(prefix)) then
+      status = 1
+      reason = "'"//prefix//"' exists and is not a directory"
+    else if (c_access(prefix//c_null_char, wx_ok) /= 0) then
+      status = 1
+      reason = "'"//prefix//"' is not writable"
+    end if
+  end subroutine could_create
 
   !> Create `path` and its missing parents (mkdir -p). On failure `status` is
   !> non-zero and `reason` says which component could not be created and why.

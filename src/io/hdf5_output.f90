@@ -29,7 +29,7 @@ module hdf5_output
   use, intrinsic :: iso_c_binding, only: c_ptr, c_loc, c_null_ptr
   use kinds, only: dp, ip, i8, MPI_INT_I8
   use errors, only: fatal_error, collective_error, exit_input_error
-  use file_system, only: is_directory, make_directories, rename_file, process_id
+  use file_system, only: is_directory, make_directories, rename_file, process_id, could_create
   use xdmf, only: write_xdmf
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Exscan, MPI_Allreduce, MPI_Bcast, MPI_Barrier, &
                      MPI_SUM, MPI_INTEGER, MPI_CHARACTER, MPI_INFO_NULL
@@ -102,16 +102,22 @@ contains
 
   !> Make sure `directory` exists and can be written, before any solving.
   !> Rank 0 creates it if missing (with its parents) and writes and deletes a
-  !> small file in it; on failure every rank of `comm` exits with status
-  !> exit_input_error and rank 0 prints which directory and why. Collective.
-  subroutine check_output_directory(comm, directory)
+  !> small file in it (with `dry_run`: only checks that it could); on failure
+  !> every rank of `comm` exits with status exit_input_error and rank 0
+  !> prints which directory and why. Collective.
+  subroutine check_output_directory(comm, directory, dry_run)
     type(MPI_Comm), intent(in) :: comm
     character(len=*), intent(in) :: directory
+    !> check only (`--check`): create nothing, write nothing
+    logical, intent(in), optional :: dry_run
     character(len=msg_len) :: reason, close_msg
     character(len=:), allocatable :: why, probe
     character(len=16) :: pid
     integer :: rank, ierr, status, close_status, unit
+    logical :: dry
 
+    dry = .false.
+    if (present(dry_run)) dry = dry_run
     call MPI_Comm_rank(comm, rank, ierr)
     status = 0
     reason = ''
@@ -119,11 +125,14 @@ contains
       if (len_trim(directory) == 0) then
         status = 1
         reason = 'is empty'
+      else if (dry) then
+        call could_create(directory, status, why)
+        if (status /= 0) reason = "cannot create '"//trim(directory)//"': "//why
       else if (.not. is_directory(directory)) then
         call make_directories(directory, status, why)
         if (status /= 0) reason = "cannot create '"//trim(directory)//"': "//why
       end if
-      if (status == 0) then
+      if (status == 0 .and. .not. dry) then
         write (pid, '(i0)') process_id()
         probe = trim(directory)//'/.feticontact_write_test.'//trim(pid)
         open (newunit=unit, file=probe, status='replace', action='write', iostat=status, iomsg=reason)

@@ -5,7 +5,7 @@ module report
   use memory_marks, only: memory_mark_count, memory_mark_get
   use proc_status, only: proc_status_bytes
   use timers, only: timer_stat_t, row_phase, row_tree, row_other, row_memory
-  use logger, only: log_is_root, log_unit
+  use logger, only: log_is_root, log_unit, log_file_unit, log_to_file
   use json_writer, only: json_writer_t
   use mpi_f08, only: MPI_Comm, MPI_Comm_size, MPI_Allreduce, MPI_MAX, MPI_MIN, MPI_SUM
   implicit none
@@ -26,6 +26,18 @@ contains
   subroutine print_timing_table(stats, total)
     type(timer_stat_t), intent(in) :: stats(:)
     real(dp), intent(in), optional :: total
+    if (.not. log_is_root()) return
+    call print_table(stats, total)
+    if (log_file_unit() == -1) return
+    call log_to_file(.true.)        ! the same table in the log file
+    call print_table(stats, total)
+    call log_to_file(.false.)
+  end subroutine print_timing_table
+
+  !> print_timing_table on log_unit().
+  subroutine print_table(stats, total)
+    type(timer_stat_t), intent(in) :: stats(:)
+    real(dp), intent(in), optional :: total
     real(dp) :: reference
     if (.not. log_is_root()) return
     if (any(stats%row == row_tree)) then
@@ -42,7 +54,7 @@ contains
     end if
     if (any(stats%row == row_memory)) call print_memory(stats)
     flush (log_unit())
-  end subroutine print_timing_table
+  end subroutine print_table
 
   !> One line per phase row, in the order given.
   subroutine print_phases(stats, reference)

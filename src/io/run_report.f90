@@ -39,7 +39,8 @@ contains
   !> Write <output%directory>/report.json. `run_case`: the input's part;
   !> `seconds`: the solve and, within it, the F actions and the coarse solves
   !> (tfeti_dualization%solve); `stats`: the reduced timers. Collective.
-  subroutine write_run_report(run_case, output, reconstruction, dual, solver, sol, contact, stats, seconds, history)
+  subroutine write_run_report(run_case, output, reconstruction, dual, solver, sol, contact, stats, seconds, history, &
+                              step)
     type(run_case_t), intent(in) :: run_case
     type(output_settings_t), intent(in) :: output
     type(reconstruction_settings_t), intent(in) :: reconstruction
@@ -50,8 +51,9 @@ contains
     type(timer_stat_t), intent(in) :: stats(:)
     real(dp), intent(in) :: seconds(3)
     !> a load history: its step records (a JSON array), report.json's `history`;
-    !> the other sections are those of the last step
+    !> the other sections are those of the step `step` (the peak), named in report.json's `step`
     character(len=*), intent(in), optional :: history
+    integer(ip), intent(in), optional :: step
     type(json_writer_t) :: js
     type(feti_t), pointer :: op
     type(feti_sizes_t) :: n
@@ -132,6 +134,7 @@ contains
     call js%add('contact_radius', contact%contact_radius)
     call js%end_object()
     call js%add_raw('memory', memory)
+    if (present(step)) call js%add('step', int(step, i8))
     if (present(history)) call js%add_raw('history', history)
     call add_coarse(js, op)
     associate (b => blas_in_use())                 ! set up by the main program

@@ -50,18 +50,19 @@ contains
 
   !> Write the temporal XDMF file `path` of a series of HDF5 files
   !> `h5_names(k)` (names relative to the directory of `path`, each as
-  !> write_xdmf describes it) at times `times(k)`: one Temporal collection
-  !> whose members (a Spatial collection of "mesh" and "contact" each) are
-  !> the steps, which ParaView shows on its time slider.
+  !> write_xdmf describes it) at times `times(k)`: one Temporal collection per
+  !> grid ("mesh", and "contact" with contact nodes) whose members, one per
+  !> step, carry the grid's own name: ParaView's time slider shows the same
+  !> named grids at every step.
   subroutine write_xdmf_series(path, h5_names, times, nnodes, nelem, ncontact, status, msg)
     character(len=*), intent(in) :: path, h5_names(:)
     real(dp), intent(in) :: times(:)
     integer(i8), intent(in) :: nnodes, nelem, ncontact
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
-    character(len=:), allocatable :: h5
+    character(len=*), parameter :: names(2) = ['mesh   ', 'contact']
     character(len=32) :: t
-    integer :: u, k
+    integer :: u, k, part
 
     msg = ''
     open (newunit=u, file=path, status='replace', action='write', iostat=status, iomsg=msg)
@@ -69,38 +70,52 @@ contains
     write (u, '(a)', iostat=status, iomsg=msg) '<?xml version="1.0" ?>', &
       '<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>', &
       '<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">', &
-      '  <Domain>', &
-      '    <Grid Name="history" GridType="Collection" CollectionType="Temporal">'
-    do k = 1, size(h5_names)
+      '  <Domain>'
+    do part = 1, merge(2, 1, ncontact > 0)
       if (status /= 0) return
-      h5 = xml_escape(trim(h5_names(k)))
-      write (t, '(es23.15e3)') times(k)
       write (u, '(a)', iostat=status, iomsg=msg) &
-        '    <Grid Name="step'//str(int(k, i8))//'" GridType="Collection" CollectionType="Spatial">', &
-        '      <Time Value="'//trim(adjustl(t))//'" />'
-      if (status /= 0) return
-      call write_grids(u, h5, nnodes, nelem, ncontact, status, msg)
+        '    <Grid Name="'//trim(names(part))//'" GridType="Collection" CollectionType="Temporal">'
+      do k = 1, size(h5_names)
+        if (status /= 0) return
+        write (t, '(es23.15e3)') times(k)
+        call write_grids(u, xml_escape(trim(h5_names(k))), nnodes, nelem, ncontact, status, msg, part, &
+                         '      <Time Value="'//trim(adjustl(t))//'" />')
+      end do
       if (status /= 0) return
       write (u, '(a)', iostat=status, iomsg=msg) '    </Grid>'
     end do
     if (status /= 0) return
-    write (u, '(a)', iostat=status, iomsg=msg) '    </Grid>', '  </Domain>', '</Xdmf>'
+    write (u, '(a)', iostat=status, iomsg=msg) '  </Domain>', '</Xdmf>'
     if (status /= 0) return
     close (u, iostat=status, iomsg=msg)
   end subroutine write_xdmf_series
 
   !> The grids of one HDF5 file `h5` (escaped) on unit u: "mesh" (hexahedra with the
   !> displacement, subdomain and von Mises) and, with contact nodes, "contact" (vertices with
-  !> the contact pressure and gap).
-  subroutine write_grids(u, h5, nnodes, nelem, ncontact, status, msg)
+  !> the contact pressure and gap). `part`: 1 the mesh only, 2 the contact only (default
+  !> both); `time`: a Time element written inside each grid.
+  subroutine write_grids(u, h5, nnodes, nelem, ncontact, status, msg, part, time)
     integer, intent(in) :: u
     character(len=*), intent(in) :: h5
     integer(i8), intent(in) :: nnodes, nelem, ncontact
     integer, intent(out) :: status
     character(len=*), intent(inout) :: msg
-    write (u, '(a)', iostat=status, iomsg=msg) &
+    integer, intent(in), optional :: part
+    character(len=*), intent(in), optional :: time
+    character(len=:), allocatable :: when
+    logical :: mesh, contact
+    mesh = .true.
+    contact = .true.
+    if (present(part)) then
+      mesh = part == 1
+      contact = part == 2
+    end if
+    when = ''
+    if (present(time)) when = time//new_line('a')
+    status = 0
+    if (mesh) write (u, '(a)', iostat=status, iomsg=msg) &
       '    <Grid Name="mesh" GridType="Uniform">', &
-      '      <Topology TopologyType="Hexahedron" NumberOfElements="'//str(nelem)//'" NodesPerElement="8">', &
+      when//'      <Topology TopologyType="Hexahedron" NumberOfElements="'//str(nelem)//'" NodesPerElement="8">', &
       data_item(h5, 'connectivity', nelem, 8, 'Int', 4), &
       '      </Topology>', &
       geometry(h5, 'coordinates', nnodes), &
@@ -108,10 +123,10 @@ contains
       attribute(h5, 'subdomain', 'Scalar', 'Cell', nelem, 0, 'Int', 4), &
       attribute(h5, 'von_mises', 'Scalar', 'Cell', nelem, 0, 'Float', 8), &
       '    </Grid>'
-    if (status /= 0 .or. ncontact <= 0) return
+    if (status /= 0 .or. ncontact <= 0 .or. .not. contact) return
     write (u, '(a)', iostat=status, iomsg=msg) &
       '    <Grid Name="contact" GridType="Uniform">', &
-      '      <Topology TopologyType="Polyvertex" NumberOfElements="'//str(ncontact)//'" NodesPerElement="1">', &
+      when//'      <Topology TopologyType="Polyvertex" NumberOfElements="'//str(ncontact)//'" NodesPerElement="1">', &
       data_item(h5, 'contact_vertices', ncontact, 0, 'Int', 4), &
       '      </Topology>', &
       geometry(h5, 'contact_coordinates', ncontact), &

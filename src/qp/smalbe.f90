@@ -235,6 +235,7 @@ module smalbe
     procedure :: recycle_directions
     procedure :: kept_directions
     procedure :: reuse_counts
+    procedure :: report_copy
   end type smalbe_t
 
 contains
@@ -646,6 +647,19 @@ contains
     faces_reused = self%polish%n_faces_reused
     recycled = self%polish%n_recycled
   end subroutine reuse_counts
+
+  !> A copy of the solver for a later report: all of it but the kept face CG
+  !> directions (up to 192 MiB per rank, which no report reads).
+  subroutine report_copy(self, copy)
+    class(smalbe_t), intent(inout) :: self
+    type(smalbe_t), intent(out) :: copy
+    real(dp), allocatable :: w(:, :), q(:, :)
+    call move_alloc(self%polish%face%recycle%w, w)
+    call move_alloc(self%polish%face%recycle%q, q)
+    copy = self
+    call move_alloc(w, self%polish%face%recycle%w)
+    call move_alloc(q, self%polish%face%recycle%q)
+  end subroutine report_copy
 
   !> Work vectors, the penalty, the tolerances and M_0, muhat = 0, the inner
   !> stopping rule, the polish's state; x projected onto the bounds.

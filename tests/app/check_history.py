@@ -98,7 +98,8 @@ def fresh(d):
 def check_steps(args):
     work = fresh(os.path.join(args.workdir, 'steps'))
     hist_out = os.path.join(work, 'history')
-    # 6 steps: factors 1/3, 2/3, 1, 3/4, 1/2, 1/4; the obstacle moves on the way down
+    # 6 steps: factors 1/3, 2/3, 1, 2/3, 1/3, 0 (unloaded through the loading factors to 0);
+    # the obstacle moves on the way down
     gaps = [0.0, 0.0, 0.0, 0.001, 0.002, 0.002]
     history = "&history nsteps = 6, path = 'load_unload', recycle = .true., gaps = %s /\n" % ', '.join(
         repr(g) for g in gaps)
@@ -108,11 +109,20 @@ def check_steps(args):
     rep = json.load(open(os.path.join(hist_out, 'report.json')))
     steps = rep['history']
     assert len(steps) == 6, 'history records: %d' % len(steps)
-    factors = [1 / 3, 2 / 3, 1.0, 0.75, 0.5, 0.25]
+    factors = [1 / 3, 2 / 3, 1.0, 2 / 3, 1 / 3, 0.0]
+    # the top level describes the peak (step 3), named in `step`
+    assert rep['step'] == 3, 'report.json step %r, expected the peak 3' % rep.get('step')
+    assert rep['contact']['total_force'] == steps[2]['total_force'], (rep['contact'], steps[2])
     worst_u = worst_f = 0.0
     for k, rec in enumerate(steps, start=1):
         assert abs(rec['load_factor'] - factors[k - 1]) < 1e-15, rec['load_factor']
         assert rec['kkt_passed'] and rec['converged'], rec
+        if factors[k - 1] == 0:
+            # the unloaded state: no separate run (its solution is exactly zero), the zero field itself
+            uh = read_h5(os.path.join(hist_out, 'run_step%04d.h5' % k))['displacement']
+            assert rec['total_force'] == 0 and np.max(np.abs(uh)) == 0, rec
+            print('step %d factor 0 gap %.4f: force 0, u = 0 (the unloaded state)' % (k, rec['gap']))
+            continue
         assert (rec['warm_start'] != 'cold') == (k > 1), rec
         single_out = os.path.join(work, 'single%d' % k)
         snml = os.path.join(work, 'single%d.nml' % k)
@@ -286,7 +296,7 @@ def check_bad(args):
         ("&history nsteps = 2, load_factors = 0.5, 1.0 /",
          r"group &history, variable load_factors: is for path = 'list' only"),
         ("&history nsteps = 2, path = 'list', load_factors = 0.5, -1.0 /",
-         r"group &history, variable load_factors: each factor must be > 0"),
+         r"group &history, variable load_factors: each factor must be >= 0"),
         ("&history nsteps = 3, gaps = 0.0, 0.1 /", r"group &history, variable gaps: needs exactly nsteps values"),
         ("&history nsteps = 2, gaps = 0.0, -0.5 /", r"group &history, variable gaps: the obstacle must not be deeper"),
         ('&history nsteps = 2, factor_peak = 0 /', r'group &history, variable factor_peak: must be > 0'),
@@ -355,21 +365,27 @@ def check_signal(args):
 PV_SCRIPT = r"""
 import sys
 from paraview.simple import XDMFReader, UpdatePipeline, servermanager
-r = XDMFReader(FileNames=[sys.argv[1]])
+xdmf, nsteps, peak = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+r = XDMFReader(FileNames=[xdmf])     # every grid enabled (the reader's default)
 times = list(r.TimestepValues)
-assert len(times) == int(sys.argv[2]), times
-maxima = []
+assert len(times) == nsteps, times
+maxima, pressure = [], []
 for t in times:
     UpdatePipeline(time=t, proxy=r)
     data = servermanager.Fetch(r)
-    block = data.GetBlock(0)
-    while block is not None and not hasattr(block, 'GetPointData'):
-        block = block.GetBlock(0)
-    u = block.GetPointData().GetArray('displacement')
+    blocks = {data.GetMetaData(i).Get(data.NAME()): data.GetBlock(i) for i in range(data.GetNumberOfBlocks())}
+    # the same named blocks at every step (README: the block "contact" holds the pressure)
+    assert sorted(blocks) == ['contact', 'mesh'], 'time %g: blocks %s' % (t, sorted(blocks))
+    assert blocks['contact'] is not None and blocks['contact'].GetNumberOfPoints() > 0, 'time %g: contact empty' % t
+    u = blocks['mesh'].GetPointData().GetArray('displacement')
     maxima.append(max(abs(u.GetRange(2)[0]), abs(u.GetRange(2)[1])))
+    pressure.append(blocks['contact'].GetPointData().GetArray('contact_pressure').GetRange()[1])
 print('times', times)
 print('max |u_z|', maxima)
-assert len(set(maxima)) == len(maxima), 'the steps show the same field'
+print('max contact pressure', pressure)
+assert pressure[peak - 1] > 0, 'the peak step shows no contact pressure'
+assert pressure[peak - 1] == max(pressure), 'the peak step has the largest pressure'
+assert pressure[-1] == 0 and maxima[-1] == 0, 'the unloaded last step shows a zero field'
 """
 
 
@@ -382,12 +398,15 @@ def check_paraview(args):
     work = fresh(os.path.join(args.workdir, 'paraview'))
     out = os.path.join(work, 'out')
     nml = os.path.join(work, 'h.nml')
-    write_input(nml, TOP_UZ, 0.0, out, "&history nsteps = 3 /\n")
+    # loading and unloading to 0: the peak (report.json `step`) in the middle, zero force at the end
+    write_input(nml, TOP_UZ, 0.0, out, "&history nsteps = 4, path = 'load_unload' /\n")
     run(args, nml)
+    peak = json.load(open(os.path.join(out, 'report.json')))['step']
+    assert peak == 2, 'report.json step %r, expected the peak 2' % peak
     script = os.path.join(work, 'steps.py')
     with open(script, 'w') as f:
         f.write(PV_SCRIPT)
-    cmd = ([xvfb, '-a'] if xvfb else []) + [pv, script, os.path.join(out, 'run.xdmf'), '3']
+    cmd = ([xvfb, '-a'] if xvfb else []) + [pv, script, os.path.join(out, 'run.xdmf'), '4', str(peak)]
     p = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     sys.stdout.write(p.stdout)
     if p.returncode != 0:

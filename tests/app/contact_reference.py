@@ -89,6 +89,7 @@ class Case:
         self.shape = g("obstacle", "shape", "sphere", _string)
         self.radius = g("obstacle", "radius", 1.0, _real)
         self.gap = g("obstacle", "gap", 0.0, _real)
+        self.axis = g("obstacle", "axis", [self.lengths[0] / 2, self.lengths[1] / 2], _reals)
         if self.variation not in ("none", "checkerboard"):
             raise ValueError("reference: material variation %r not supported" % self.variation)
         if self.variation == "checkerboard" and self.decomposition != "box":
@@ -244,11 +245,10 @@ class Problem:
         bottom = np.nonzero(ijk[:, 2] == 0)[0]
         bottom = bottom[~self.fixed[3 * bottom + 2]]
         xb = m.x[bottom]
-        lx, ly = case.lengths[0], case.lengths[1]
         if case.shape == "plane":
             psi = np.full(len(bottom), -case.gap)
         elif case.shape == "sphere":
-            r2 = (xb[:, 0] - lx / 2) ** 2 + (xb[:, 1] - ly / 2) ** 2
+            r2 = (xb[:, 0] - case.axis[0]) ** 2 + (xb[:, 1] - case.axis[1]) ** 2
             keep = r2 <= case.radius ** 2
             bottom, xb, r2 = bottom[keep], xb[keep], r2[keep]
             psi = -case.radius - case.gap + np.sqrt(case.radius ** 2 - r2)

@@ -11,7 +11,7 @@ variable is not echoed, or when an echoed variable is not documented: a default
 changed in one place only. The other pages (`--pages`: docs/*.md, README.md) are
 searched for "`&group variable = value` (the default" and ", the default": each
 such statement must also give the echoed value. The one exception is a variable the program resolves
-at start and echoes resolved (`&mesh cluster`: 0, 0, 0 means "chosen at start").
+at start and echoes resolved (`&mesh cluster`: 0, 0, 0 means "chosen at start"; `&obstacle axis`: the face centre of the body).
 Exit status 0 when every check passes.
 """
 import argparse
@@ -21,7 +21,7 @@ import subprocess
 import sys
 
 # documented default -> what the echo shows instead, because the program resolves it at start
-RESOLVED_AT_START = {("mesh", "cluster")}
+RESOLVED_AT_START = {("mesh", "cluster"), ("obstacle", "axis")}
 # lists without a default value: the echo holds them only when given
 EMPTY_UNLESS_GIVEN = {("history", "gaps"), ("history", "load_factors")}
 
