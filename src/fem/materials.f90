@@ -18,7 +18,7 @@ module materials
   public :: subdomain_material
 
   !> Poisson's ratio from which the fully integrated Q1 draws a warning.
-  real(dp), parameter, public :: nearly_incompressible = 0.45_dp
+  real(dp), parameter :: nearly_incompressible = 0.45_dp
 
   !> The settings of `&material` (docs/INPUT.md): defaults, the checks within
   !> the group and the namelist variables (params hands the group over).
