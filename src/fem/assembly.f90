@@ -8,7 +8,7 @@ module assembly
   use box_mesh, only: face_z0, face_z1
   use decomposition, only: decomposition_t
   use subdomain, only: subdomain_t
-  use q1_element, only: q1_stiffness, q1_face_load, q1_face_shape_integrals, q1_centroid_stress, &
+  use q1_element, only: element_stiffness, q1_face_load, q1_face_shape_integrals, element_centroid_stress, &
                         von_mises, q1_face_nodes
   use materials, only: subdomain_material
   use rigid_modes, only: rigid_body_modes
@@ -95,6 +95,7 @@ contains
     else
       call subdomain_material(material, dec, sub%id, sub%young, sub%poisson)
     end if
+    sub%element = material%element_kind()
     if (with_k) call assemble_stiffness(sub)
     if (allocated(sub%f)) deallocate (sub%f)
     allocate (sub%f(sub%ndof))
@@ -106,7 +107,8 @@ contains
     call rigid_body_modes(sub%coords, sub%centroid, sub%R)
   end subroutine assemble_subdomain
 
-  !> K of `sub` with its material (sub%young, sub%poisson). The pattern comes
+  !> K of `sub` with its material (sub%young, sub%poisson) and element
+  !> formulation (sub%element). The pattern comes
   !> from the node adjacency (nodes sharing an element, 3x3 blocks), so the
   !> work is proportional to the number of elements.
   subroutine assemble_stiffness(sub)
@@ -186,7 +188,7 @@ contains
       reuse = have_prev
       if (reuse) reuse = maxval(abs(xrel - xrel_prev)) <= same_shape   ! (no short-circuit in Fortran)
       if (.not. reuse) then
-        call q1_stiffness(x, sub%young, sub%poisson, ke)
+        call element_stiffness(sub%element, x, sub%young, sub%poisson, ke)
         xrel_prev = xrel
         have_prev = .true.
       end if
@@ -273,7 +275,7 @@ contains
   end function element_displacements
 
   !> Von Mises stress vm(nelem) at the element centroids for the subdomain
-  !> displacements u(ndof).
+  !> displacements u(ndof), with the stress of the subdomain's element formulation.
   subroutine subdomain_von_mises(sub, u, vm)
     type(subdomain_t), intent(in) :: sub
     real(dp), intent(in) :: u(:)
@@ -285,8 +287,8 @@ contains
     young = sub%young
     do e = 1, sub%nelem
       if (allocated(sub%elem_young)) young = sub%elem_young(e)
-      call q1_centroid_stress(sub%coords(:, sub%elem_nodes(:, e)), element_displacements(sub, e, u), &
-                              young, sub%poisson, sigma)
+      call element_centroid_stress(sub%element, sub%coords(:, sub%elem_nodes(:, e)), &
+                                   element_displacements(sub, e, u), young, sub%poisson, sigma)
       vm(e) = von_mises(sigma)
     end do
   end subroutine subdomain_von_mises

@@ -4,7 +4,14 @@
 !> 5..8 the same at +1, i.e. the mesh order (i,j,k) (i+1,j,k) (i+1,j+1,k) (i,j+1,k).
 !> Element dof of node a, component c: 3*(a-1) + c. Voigt order of strains and
 !> stresses: xx, yy, zz, xy, yz, zx, with engineering shear strains (2 eps_xy).
-!> Full 2x2x2 Gauss quadrature for the stiffness; 2x2 Gauss on faces.
+!> Two element formulations on the same nodes (chosen once at set-up by an
+!> integer kind, `element_q1` or `element_q1_bbar`):
+!> - Q1: full 2x2x2 Gauss quadrature of B^T D B (locks as nu -> 1/2);
+!> - Q1 B-bar (mean dilatation, Q1/P0): the deviatoric part 2 mu dev(eps) at
+!>   the 2x2x2 points, the volumetric part with the element's mean dilatation
+!>   (1/V) integral of div u, i.e. one constant pressure per element condensed
+!>   out (docs/THEORY.md "The element").
+!> 2x2 Gauss on faces.
 module q1_element
   use kinds, only: dp, ip
   use errors, only: fatal_error
@@ -12,7 +19,11 @@ module q1_element
   private
 
   public :: elasticity_matrix, q1_shape, q1_gradients, q1_stiffness, q1_face_shape_integrals, &
-            q1_face_load, q1_centroid_stress, q1_centroid_strain, von_mises
+            q1_face_load, q1_centroid_stress, q1_centroid_strain, von_mises, q1_bbar_stiffness, &
+            q1_bbar_centroid_stress, element_stiffness, element_centroid_stress
+
+  !> Element formulations (kinds): fully integrated Q1, Q1 B-bar (mean dilatation).
+  integer, parameter, public :: element_q1 = 1, element_q1_bbar = 2
 
   !> Local nodes of the 6 element faces, ordered around each face; faces in the
   !> order of box_mesh: x0, x1, y0, y1, z0, z1 (z0 = nodes 1..4, z1 = 5..8).
@@ -121,14 +132,75 @@ contains
   subroutine q1_stiffness(x, young, poisson, ke)
     real(dp), intent(in) :: x(3, 8), young, poisson
     real(dp), intent(out) :: ke(24, 24)
-    real(dp) :: g(8, 3), detj, lam, mu, lg(8, 3), mg(8, 3), dot, blk(3, 3)
-    integer :: p, q, r, a, b, i, j, ra, rb
+    real(dp) :: lam, mu, gvol(8, 3), vol
     call lame(young, poisson, lam, mu)
+    call gauss_stiffness(x, lam, mu, ke, gvol, vol)
+  end subroutine q1_stiffness
+
+  !> The B-bar (mean dilatation) stiffness ke(24,24): the deviatoric energy
+  !> 2 mu dev(eps):dev(eps) at the 2x2x2 points, i.e. the closed form above
+  !> with lambda replaced by -2 mu / 3, plus the volumetric energy of the
+  !> element's mean dilatation theta = (1/V) integral div u = gbar . u_e,
+  !>
+  !>     K_e = K_dev + kappa V gbar gbar^T,   kappa = lambda + 2 mu / 3,
+  !>
+  !> gbar(a,i) = (1/V) integral dN_a/dx_i. This is Q1 with one constant
+  !> pressure per element eliminated (Q1/P0): the incompressibility is one
+  !> constraint per element instead of eight, so the element does not lock.
+  !> The kernel is that of Q1 (the rigid modes; pfunit_fem_q1_element).
+  subroutine q1_bbar_stiffness(x, young, poisson, ke)
+    real(dp), intent(in) :: x(3, 8), young, poisson
+    real(dp), intent(out) :: ke(24, 24)
+    real(dp) :: lam, mu, kappa, gvol(8, 3), vol, sg(8, 3)
+    integer :: a, b, i, j
+    call lame(young, poisson, lam, mu)
+    call gauss_stiffness(x, -2*mu/3, mu, ke, gvol, vol)
+    kappa = lam + 2*mu/3
+    ! kappa V gbar gbar^T = sg sg^T with sg = sqrt(kappa / V) gvol (exactly symmetric)
+    sg = sqrt(kappa/vol)*gvol
+    do b = 1, 8
+      do j = 1, 3
+        do a = 1, 8
+          do i = 1, 3
+            ke(3*(a - 1) + i, 3*(b - 1) + j) = ke(3*(a - 1) + i, 3*(b - 1) + j) + sg(a, i)*sg(b, j)
+          end do
+        end do
+      end do
+    end do
+  end subroutine q1_bbar_stiffness
+
+  !> The stiffness of element kind `kind` (element_q1, element_q1_bbar).
+  subroutine element_stiffness(kind, x, young, poisson, ke)
+    integer, intent(in) :: kind
+    real(dp), intent(in) :: x(3, 8), young, poisson
+    real(dp), intent(out) :: ke(24, 24)
+    select case (kind)
+    case (element_q1)
+      call q1_stiffness(x, young, poisson, ke)
+    case (element_q1_bbar)
+      call q1_bbar_stiffness(x, young, poisson, ke)
+    case default
+      call fatal_error('element_stiffness: unknown element kind')
+    end select
+  end subroutine element_stiffness
+
+  !> The closed form above summed over the 2x2x2 Gauss points with the
+  !> coefficients lam (of g_a,i g_b,j) and mu; also gvol(a,i) = integral of
+  !> dN_a/dx_i and the volume vol (the same quadrature, exact for them).
+  subroutine gauss_stiffness(x, lam, mu, ke, gvol, vol)
+    real(dp), intent(in) :: x(3, 8), lam, mu
+    real(dp), intent(out) :: ke(24, 24), gvol(8, 3), vol
+    real(dp) :: g(8, 3), detj, lg(8, 3), mg(8, 3), dot, blk(3, 3)
+    integer :: p, q, r, a, b, i, j, ra, rb
     ke = 0
+    gvol = 0
+    vol = 0
     do r = -1, 1, 2
       do q = -1, 1, 2
         do p = -1, 1, 2
           call q1_gradients(x, gauss*[p, q, r], g, detj)
+          gvol = gvol + detj*g
+          vol = vol + detj
           lg = (lam*detj)*g
           mg = (mu*detj)*g
           do b = 1, 8
@@ -156,7 +228,7 @@ contains
         ke(ra + 1:ra + 3, rb + 1:rb + 3) = transpose(ke(rb + 1:rb + 3, ra + 1:ra + 3))
       end do
     end do
-  end subroutine q1_stiffness
+  end subroutine gauss_stiffness
 
   !> Integrals w(4) of the 4 (bilinear) shape functions over a quadrilateral
   !> face with corners xf(3,4) in cyclic order: the tributary areas of its nodes.
@@ -217,6 +289,54 @@ contains
     call strain_matrix(g, b)
     eps = matmul(b, u)
   end subroutine q1_centroid_strain
+
+  !> The B-bar element's stress sigma(6) at the centroid: the strain of the
+  !> element's split, dev(eps(0)) + theta/3 I with theta the mean dilatation,
+  !> times D: sigma = 2 mu dev(eps(0)) + kappa theta I. Its deviatoric part
+  !> (hence von Mises) is Q1's at the centroid; its pressure is the element's
+  !> condensed pressure -kappa theta.
+  subroutine q1_bbar_centroid_stress(x, u, young, poisson, sigma)
+    real(dp), intent(in) :: x(3, 8), u(24), young, poisson
+    real(dp), intent(out) :: sigma(6)
+    real(dp) :: g(8, 3), b(6, 24), detj, eps(6), gvol(8, 3), vol, theta
+    integer :: p, q, r, a
+    gvol = 0
+    vol = 0
+    do r = -1, 1, 2
+      do q = -1, 1, 2
+        do p = -1, 1, 2
+          call q1_gradients(x, gauss*[p, q, r], g, detj)
+          gvol = gvol + detj*g
+          vol = vol + detj
+        end do
+      end do
+    end do
+    theta = 0
+    do a = 1, 8
+      theta = theta + dot_product(gvol(a, :), u(3*a - 2:3*a))
+    end do
+    theta = theta/vol
+    call q1_gradients(x, [0.0_dp, 0.0_dp, 0.0_dp], g, detj)
+    call strain_matrix(g, b)
+    eps = matmul(b, u)
+    eps(1:3) = eps(1:3) + (theta - sum(eps(1:3)))/3
+    sigma = matmul(elasticity_matrix(young, poisson), eps)
+  end subroutine q1_bbar_centroid_stress
+
+  !> The centroid stress of element kind `kind`.
+  subroutine element_centroid_stress(kind, x, u, young, poisson, sigma)
+    integer, intent(in) :: kind
+    real(dp), intent(in) :: x(3, 8), u(24), young, poisson
+    real(dp), intent(out) :: sigma(6)
+    select case (kind)
+    case (element_q1)
+      call q1_centroid_stress(x, u, young, poisson, sigma)
+    case (element_q1_bbar)
+      call q1_bbar_centroid_stress(x, u, young, poisson, sigma)
+    case default
+      call fatal_error('element_centroid_stress: unknown element kind')
+    end select
+  end subroutine element_centroid_stress
 
   !> Von Mises equivalent stress of sigma(6) (Voigt order).
   pure real(dp) function von_mises(sigma)

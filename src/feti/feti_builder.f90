@@ -155,6 +155,7 @@ contains
       ! E and nu first: the geometric comparison needs them
       call subdomain_material(settings%material, this%dec, this%subs(ls)%id, this%subs(ls)%young, &
                               this%subs(ls)%poisson)
+      this%subs(ls)%element = settings%material%element_kind()
       if (this%hybrid .and. .not. merges_corners(settings%mesh) .and. settings%material%variation /= 'none') &
         call element_moduli(this, settings, this%subs(ls))
       ! a cluster whose elements carry their own moduli is compared by its assembled K

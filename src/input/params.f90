@@ -894,6 +894,8 @@ contains
     character(len=msg_len), allocatable :: w(:)
     character(len=msg_len) :: line
     allocate (w(0))
+    line = p%material%warning()
+    if (len_trim(line) > 0) w = [character(len=msg_len) :: w, line]
     associate (o => p%obstacle, b => p%boundary)
       ! the face z = 0 moves down by at most -uz of the prescribed top (the body only shortens)
       if (o%shape /= 'none' .and. b%top_dirichlet .and. b%top_displacement(3) > 0) then

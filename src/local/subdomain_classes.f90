@@ -26,7 +26,7 @@
 module subdomain_classes
   use kinds, only: dp, ip
   use subdomain, only: subdomain_t
-  use q1_element, only: q1_stiffness
+  use q1_element, only: element_stiffness
   implicit none
   private
 
@@ -162,7 +162,7 @@ contains
     if (count(sub%elem_nodes == 1) /= 1) return
     i = findloc(sub%elem_nodes(:, 1), 1, dim=1)
     if (i == 0) return
-    call q1_stiffness(sub%coords(:, sub%elem_nodes(:, 1)), sub%young, sub%poisson, ke)
+    call element_stiffness(sub%element, sub%coords(:, sub%elem_nodes(:, 1)), sub%young, sub%poisson, ke)
     k11 = ke(3*i - 2, 3*i - 2)
   end function first_diagonal
 
@@ -178,6 +178,7 @@ contains
     same = .false.
     if (a%nnodes /= b%nnodes .or. a%nelem /= b%nelem .or. a%nnodes < 1) return
     if (a%poisson /= b%poisson .or. .not. (a%young > 0 .and. b%young > 0)) return
+    if (a%element /= b%element) return
     if (.not. allocated(a%coords) .or. .not. allocated(b%coords)) return
     tol = 8*epsilon(1.0_dp)*max(1.0_dp, maxval(abs(a%coords)), maxval(abs(b%coords)))
     do k = 1, a%nnodes

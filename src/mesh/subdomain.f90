@@ -28,6 +28,7 @@ module subdomain
     integer(ip), allocatable :: elem_nodes(:, :)        !< (8, nelem) local node numbers, Q1 order
     real(dp) :: centroid(3) = 0                         !< mean of the node coordinates
     real(dp) :: young = 0, poisson = 0
+    integer :: element = 1                              !< element formulation (fem's q1_element kinds; 1: Q1)
     type(csr_t) :: K                                    !< stiffness (full symmetric storage)
     !> K shared per class of congruent subdomains (subdomain_classes): 0 when
     !> K is this subdomain's own; else the local index of the subdomain whose
