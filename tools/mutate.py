@@ -13,6 +13,7 @@ run rebuilds only what a fault touches.
     tools/mutate.py -R 'app_reference|app_block_exact' --target feticontact
     tools/mutate.py --only 'feti_.*gap' -L app -LE cluster --report /tmp/mutate.json
     tools/mutate.py --list                       # the faults, nothing run
+    tools/mutate.py --stop-on-failure ...        # a fault's tests end at the first that fails
 
 Writes a JSON report (--report) and prints one line per fault as it goes, then a table of the
 caught faults (with the tests that caught each) and the survivors.
@@ -98,12 +99,12 @@ def run(cmd, log, timeout=None, cwd=None):
             return 124
 
 
-def ctest(build, selection, jobs, timeout, log):
+def ctest(build, selection, jobs, timeout, log, stop=False):
     """Run the selection; returns (names of the tests run, names of those that failed)."""
     junit = os.path.join(build, "mutate-junit.xml")
     if os.path.exists(junit):
         os.remove(junit)
-    cmd = ["ctest", "--test-dir", build, "-j", str(jobs), "--timeout", str(timeout), "--output-junit", junit] + selection
+    cmd = ["ctest", "--test-dir", build, "-j", str(jobs), "--timeout", str(timeout), "--output-junit", junit] + selection + (["--stop-on-failure"] if stop else [])
     run(cmd, log)
     ran, failed = [], []
     if os.path.exists(junit):
@@ -128,6 +129,8 @@ def main():
     ap.add_argument("--timeout", type=int, default=300, help="per test [s]")
     ap.add_argument("-R", dest="R"), ap.add_argument("-E", dest="E")
     ap.add_argument("-L", dest="L"), ap.add_argument("-LE", dest="LE")
+    ap.add_argument("--stop-on-failure", action="store_true",
+                    help="end a fault's CTest run at its first failing test (faster; names one catcher)")
     ap.add_argument("--report", default=None, help="JSON report (default <scratch>/mutate-report.json)")
     ap.add_argument("--no-baseline", action="store_true", help="skip the unmutated run (assume all pass)")
     args = ap.parse_args()
@@ -190,7 +193,7 @@ def main():
             if run(build_cmd, log):
                 status, caught_by, ran = "does not compile", [], []
             else:
-                ran, failed = ctest(build, selection, args.ctest_jobs, args.timeout, log)
+                ran, failed = ctest(build, selection, args.ctest_jobs, args.timeout, log, args.stop_on_failure)
                 caught_by = [t for t in failed if t not in baseline_failed]
                 status = "caught" if caught_by else "survived"
         finally:

@@ -240,6 +240,7 @@ def check_reference(outdir, case_file, groups, factor):
         u = h5["displacement"][...]
         xc = h5["contact_coordinates"][...]
         pc = h5["contact_pressure"][...]
+        gc = h5["contact_gap"][...]
     ijk, h = node_ijk(x, groups)
     idx = ref.mesh.node_index(ijk)
     check(len(x) >= ref.mesh.nn and set(idx.tolist()) == set(range(ref.mesh.nn)),
@@ -262,6 +263,11 @@ def check_reference(outdir, case_file, groups, factor):
         perr = np.abs(pc - p_ref).max() / pscale
         check(perr <= factor * tol, "max |p - p_ref| / max p_ref = %.3e <= %g tol (%.2f tol)"
               % (perr, factor, perr / tol))
+        # the deformed gap g + u_z of each contact node (docs/CASES.md), to the displacement bound
+        g_ref = ref.g[rows] + u_ref[ref.contact_nodes[rows], 2]
+        gerr = np.abs(gc - g_ref).max() / scale
+        check(gerr <= factor * tol, "max |gap - gap_ref| / max |u_ref| = %.3e <= %g tol (%.2f tol)"
+              % (gerr, factor, gerr / tol))
     return ref, nact
 
 
@@ -500,6 +506,7 @@ def check_hertz(outdir, groups):
     with fields(outdir) as h5:
         xc = h5["contact_coordinates"][...]
         pc = h5["contact_pressure"][...]
+        gc = h5["contact_gap"][...]
     _, h = node_ijk(xc, groups)
     area = np.full(len(xc), h[0] * h[1])
     for c in range(2):
