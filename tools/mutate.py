@@ -23,6 +23,7 @@ import json
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -104,7 +105,8 @@ def ctest(build, selection, jobs, timeout, log, stop=False):
     junit = os.path.join(build, "mutate-junit.xml")
     if os.path.exists(junit):
         os.remove(junit)
-    cmd = ["ctest", "--test-dir", build, "-j", str(jobs), "--timeout", str(timeout), "--output-junit", junit] + selection + (["--stop-on-failure"] if stop else [])
+    cmd = ["ctest", "--test-dir", build, "-j", str(jobs), "--timeout", str(timeout), "--output-junit", junit]
+    cmd += selection + (["--stop-on-failure"] if stop else [])
     run(cmd, log)
     ran, failed = [], []
     if os.path.exists(junit):
@@ -135,6 +137,12 @@ def main():
     ap.add_argument("--no-baseline", action="store_true", help="skip the unmutated run (assume all pass)")
     args = ap.parse_args()
 
+    # SIGTERM (and SIGINT, which a background job ignores otherwise) end the run through the
+    # `finally` that restores the mutated file; a copy left mutated is restored by the next sync
+    def stop(signum, frame):
+        raise KeyboardInterrupt("signal %d" % signum)
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
     faults = read_faults(args.mutations)
     if args.only:
         faults = [f for f in faults if re.search(args.only, f["label"])]
