@@ -44,11 +44,12 @@ MATRIX = [
     ("coarse_mumps", "coarse_factor=mumps", "both"),
     ("coarse_dense", "coarse_factor=dense;coarse_ranks=1", "both"),
     ("coarse_orthonormal", "coarse=orthonormal", "both"),
-    ("local_dense", "local_solver=dense", "both"),
-    ("local_block", "local_solver=block", "both"),
-    ("local_subdomain", "local_solver=subdomain", "both"),
-    ("ordering_amd", "local_ordering=amd", "both"),
-    ("ordering_metis", "local_ordering=metis", "both"),
+    # share_subdomains = 'none': with shared classes (the default) the class's solver is used
+    ("local_dense", "local_solver=dense;share_subdomains=none", "both"),
+    ("local_block", "local_solver=block;share_subdomains=none", "both"),
+    ("local_subdomain", "local_solver=subdomain;share_subdomains=none", "both"),
+    ("ordering_amd", "local_ordering=amd;local_solver=subdomain;share_subdomains=none", "both"),
+    ("ordering_metis", "local_ordering=metis;local_solver=subdomain;share_subdomains=none", "both"),
     ("f_implicit", "f_action=implicit", "both"),
     ("f_explicit_packed", "f_action=explicit;f_storage=packed", "both"),
     ("f_explicit_symmetric", "f_action=explicit;f_storage=symmetric", "both"),
@@ -75,6 +76,10 @@ def write_namelist(groups, path):
             f.write("&%s %s /\n" % (g, ", ".join("%s = %s" % kv for kv in items)))
 
 
+def groups_settings(groups):
+    return [(g, n, v) for g, items in groups.items() for n, v in items]
+
+
 def run(args, name, groups):
     out = os.path.join(args.workdir, name)
     shutil.rmtree(out, ignore_errors=True)
@@ -89,7 +94,14 @@ def run(args, name, groups):
     import h5py
     with h5py.File(os.path.join(out, "run.h5"), "r") as h5:
         x, u = h5["coordinates"][...], h5["displacement"][...]
-    force = json.load(open(os.path.join(out, "report.json")))["contact"]["total_force"]
+    report = json.load(open(os.path.join(out, "report.json")))
+    force = report["contact"]["total_force"]
+    # a variant that chooses the local solver or the F action must be the one the run used
+    perf = report.get("performance", {})
+    for var in ("local_solver", "f_action", "local_ordering"):
+        wanted = [v.strip("'") for g, n, v in groups_settings(groups) if g == "solver" and n == var]
+        if wanted and var in perf and perf[var] != wanted[0]:
+            return None, "report.json performance.%s = %s, not the variant's %s" % (var, perf[var], wanted[0])
     keys = [tuple(k) for k in np.round(x * 1e9).astype(np.int64)]
     return (dict(zip(keys, u)), force), None
 
