@@ -151,7 +151,7 @@ def check_pressure_steps(args):
     """A pressure-loaded history (free top face held by the symmetry planes and the obstacle)
     whose obstacle moves: every step equals a separate one-step run at that step's pressure and
     gap (U_BOUND, F_BOUND), its recorded contact force balances the step's load p Lx Ly (the
-    symmetry planes hold x and y only) to 100 tol, and equals the bottom reactions recomputed from
+    symmetry planes hold x and y only) to 100 tol, and equals (as does the log's step line) the bottom reactions recomputed from
     the step's HDF5 displacements by the test's own element assembly (contact_reference)."""
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import contact_reference
@@ -164,9 +164,12 @@ def check_pressure_steps(args):
     nml = os.path.join(work, 'history.nml')
     with open(nml, 'w') as f:
         f.write(PRESSURE.format(p=PEAK_PRESSURE, gap=0.0, tol=TOL, out=hist_out) + history)
-    run(args, nml)
+    log = run(args, nml).stdout
     steps = json.load(open(os.path.join(hist_out, 'report.json')))['history']
     assert len(steps) == 4, 'history records: %d' % len(steps)
+    # the log's step lines state the same forces (es11.4: 5 digits)
+    logged = [float(f) for f in re.findall(r'step \d+/4: factor .*?, force\s+([-+0-9.eE]+)', log)]
+    assert len(logged) == 4, 'step lines in the log: %d' % len(logged)
     for k, rec in enumerate(steps, start=1):
         assert abs(rec['load_factor'] - factors[k - 1]) < 1e-15 and rec['gap'] == gaps[k - 1], rec
         assert rec['kkt_passed'] and rec['converged'], rec
@@ -195,6 +198,8 @@ def check_pressure_steps(args):
             k, rec['total_force'], load)
         assert abs(fu - rec['total_force']) <= 100 * TOL * load, 'step %d: recorded force %.10e, from u %.10e' % (
             k, rec['total_force'], fu)
+        assert abs(logged[k - 1] - fu) <= 1e-4 * load, 'step %d: logged force %.4e, from u %.10e' % (
+            k, logged[k - 1], fu)
     print('pressure: 4 steps equal their separate runs, every recorded force balances the load')
 
 
