@@ -151,7 +151,8 @@ def check_pressure_steps(args):
     """A pressure-loaded history (free top face held by the symmetry planes and the obstacle)
     whose obstacle moves: every step equals a separate one-step run at that step's pressure and
     gap (U_BOUND, F_BOUND), its recorded contact force balances the step's load p Lx Ly (the
-    symmetry planes hold x and y only) to 100 tol, and equals (as does the log's step line) the bottom reactions recomputed from
+    symmetry planes hold x and y only) to 100 tol, and equals (as does the log's step line) the
+    bottom reactions recomputed from
     the step's HDF5 displacements by the test's own element assembly (contact_reference)."""
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import contact_reference
