@@ -149,6 +149,74 @@ def check_steps(args):
     print('steps: worst |du|/|u| %.2e (bound %.1e), |dF|/|F| %.2e (bound %.1e)' % (worst_u, U_BOUND, worst_f, F_BOUND))
 
 
+PRESSURE = """&mesh nsub = 2, 2, 2, nel = 3, 3, 3 /
+&material young = 2.1e5, poisson = 0.3 /
+&load top_pressure = {p!r} /
+&boundary top_dirichlet = .false., symmetry_x0 = .true., symmetry_y0 = .true. /
+&obstacle shape = 'sphere', radius = 20.0, gap = {gap!r} /
+&solver tol = {tol!r} /
+&output directory = '{out}', run_name = 'run' /
+"""
+PEAK_PRESSURE = 200.0
+
+
+def check_pressure_steps(args):
+    """A pressure-loaded history (free top face held by the symmetry planes and the obstacle)
+    whose obstacle moves: every step equals a separate one-step run at that step's pressure and
+    gap (U_BOUND, F_BOUND), its recorded contact force balances the step's load p Lx Ly (the
+    symmetry planes hold x and y only) to 100 tol, and equals (as does the log's step line) the
+    bottom reactions recomputed from
+    the step's HDF5 displacements by the test's own element assembly (contact_reference)."""
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import contact_reference
+    work = fresh(os.path.join(args.workdir, 'pressure'))
+    hist_out = os.path.join(work, 'history')
+    factors = [0.25, 1.0, 0.5, 0.75]
+    gaps = [0.0, 0.0, -0.002, 0.001]
+    history = "&history nsteps = 4, path = 'list', load_factors = %s, gaps = %s /\n" % (
+        ', '.join(repr(f) for f in factors), ', '.join(repr(g) for g in gaps))
+    nml = os.path.join(work, 'history.nml')
+    with open(nml, 'w') as f:
+        f.write(PRESSURE.format(p=PEAK_PRESSURE, gap=0.0, tol=TOL, out=hist_out) + history)
+    log = run(args, nml).stdout
+    steps = json.load(open(os.path.join(hist_out, 'report.json')))['history']
+    assert len(steps) == 4, 'history records: %d' % len(steps)
+    # the log's step lines state the same forces (es11.4: 5 digits)
+    logged = [float(f) for f in re.findall(r'step \d+/4: factor .*?, force\s+([-+0-9.eE]+)', log)]
+    assert len(logged) == 4, 'step lines in the log: %d' % len(logged)
+    for k, rec in enumerate(steps, start=1):
+        assert abs(rec['load_factor'] - factors[k - 1]) < 1e-15 and rec['gap'] == gaps[k - 1], rec
+        assert rec['kkt_passed'] and rec['converged'], rec
+        single_out = os.path.join(work, 'single%d' % k)
+        snml = os.path.join(work, 'single%d.nml' % k)
+        with open(snml, 'w') as f:
+            f.write(PRESSURE.format(p=PEAK_PRESSURE * factors[k - 1], gap=gaps[k - 1], tol=TOL, out=single_out))
+        run(args, snml)
+        srep = json.load(open(os.path.join(single_out, 'report.json')))
+        h = read_h5(os.path.join(hist_out, 'run_step%04d.h5' % k))
+        us = read_h5(os.path.join(single_out, 'run.h5'))['displacement']
+        du = np.max(np.abs(h['displacement'] - us)) / np.max(np.abs(us))
+        fs = srep['contact']['total_force']
+        df = abs(rec['total_force'] - fs) / abs(fs)
+        load = PEAK_PRESSURE * factors[k - 1]                 # p Lx Ly, Lx = Ly = 1
+        case = contact_reference.Case.read(snml)
+        r = contact_reference.copy_reactions(case, h['coordinates'], h['displacement'], h['connectivity'],
+                                             h['subdomain'])
+        bottom = np.abs(h['coordinates'][:, 2]) < 1e-12
+        fu = r[bottom, 2].sum()
+        print('step %d factor %.2f gap %.4f: |du|/|u| %.2e, |dF|/|F| %.2e, force %.10e, from u %.10e, load %.4e'
+              % (k, factors[k - 1], gaps[k - 1], du, df, rec['total_force'], fu, load))
+        assert du <= U_BOUND, 'step %d: displacements differ by %.3e > %.1e' % (k, du, U_BOUND)
+        assert df <= F_BOUND, 'step %d: contact force differs by %.3e > %.1e' % (k, df, F_BOUND)
+        assert abs(rec['total_force'] - load) <= 100 * TOL * load, 'step %d: recorded force %.10e, load %.10e' % (
+            k, rec['total_force'], load)
+        assert abs(fu - rec['total_force']) <= 100 * TOL * load, 'step %d: recorded force %.10e, from u %.10e' % (
+            k, rec['total_force'], fu)
+        assert abs(logged[k - 1] - fu) <= 1e-4 * load, 'step %d: logged force %.4e, from u %.10e' % (
+            k, logged[k - 1], fu)
+    print('pressure: 4 steps equal their separate runs, every recorded force balances the load')
+
+
 BLOCK = """&mesh nsub = {nsub}, {nsub}, {nsub}, nel = {nel}, {nel}, {nel} /
 &material young = 2.1e5, poisson = 0.3 /
 &boundary top_dirichlet = .true., top_displacement = 0.0, 0.0, -0.01 /
@@ -422,12 +490,12 @@ def main():
     ap.add_argument('--ranks', type=int, default=2)
     ap.add_argument('--workdir', required=True)
     ap.add_argument('--mesh', default=None, help="the &mesh variables (default: %s)" % MESH)
-    ap.add_argument('check', choices=['steps', 'restart', 'bad', 'signal', 'paraview', 'savings'])
+    ap.add_argument('check', choices=['steps', 'pressure', 'restart', 'bad', 'signal', 'paraview', 'savings'])
     args = ap.parse_args()
     if args.mesh:
         globals()['MESH'] = args.mesh
     os.makedirs(args.workdir, exist_ok=True)
-    status = {'steps': check_steps, 'restart': check_restart, 'bad': check_bad,
+    status = {'steps': check_steps, 'pressure': check_pressure_steps, 'restart': check_restart, 'bad': check_bad,
               'signal': check_signal, 'paraview': check_paraview, 'savings': check_savings}[args.check](args)
     return status or 0
 

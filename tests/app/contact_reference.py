@@ -94,8 +94,8 @@ class Case:
             raise ValueError("reference: material variation %r not supported" % self.variation)
         if self.variation == "checkerboard" and self.decomposition != "box":
             raise ValueError("reference: the checkerboard needs box subdomains")
-        if not self.top_dirichlet:
-            raise ValueError("reference: needs top_dirichlet (a coercive problem)")
+        if not self.top_dirichlet and not (self.symmetry_x0 and self.symmetry_y0 and self.shape != "none"):
+            raise ValueError("reference: needs top_dirichlet, or both symmetry planes and an obstacle")
 
     @staticmethod
     def read(path):
@@ -238,7 +238,7 @@ class Problem:
         if case.symmetry_y0:
             self.fixed[3 * np.nonzero(ijk[:, 1] == 0)[0] + 1] = True
         top = np.nonzero(ijk[:, 2] == m.ng[2])[0]
-        for c in range(3):
+        for c in range(3 if case.top_dirichlet else 0):
             self.fixed[3 * top + c] = True
             self.value[3 * top + c] = case.top_displacement[c]
         # contact rows: bottom nodes above the obstacle, -u_z <= g = z - psi
@@ -281,9 +281,11 @@ class Problem:
         return u, lam
 
     def solve(self, max_iterations=100):
-        """Primal-dual active set iteration from the empty set; returns (u (nn, 3), lambda)."""
+        """Primal-dual active set iteration from the empty set (from the full set when the top
+        face is free: then only the contact holds u_z, and K restricted to the free dofs is
+        singular without it); returns (u (nn, 3), lambda)."""
         c = np.mean(np.diag(self.k))
-        active = np.zeros(len(self.contact_dofs), dtype=bool)
+        active = np.full(len(self.contact_dofs), not self.case.top_dirichlet)
         seen = set()
         for it in range(max_iterations):
             u, lam = self.solve_with(active)
@@ -318,6 +320,34 @@ class Problem:
 
     def pressure(self):
         return self.lam / self.area
+
+
+def element_young(case, subdomain):
+    """Young's modulus of elements of the subdomains `subdomain` (ids from 1, box numbering
+    1 + I + Nx (J + Ny K)): the checkerboard of docs/CASES.md."""
+    e = np.full(len(subdomain), case.young)
+    if case.variation == "checkerboard":
+        r = np.asarray(subdomain) - 1
+        i, r = r % case.nsub[0], r // case.nsub[0]
+        j, k = r % case.nsub[1], r // case.nsub[1]
+        e[(i + j + k) % 2 == 1] *= case.contrast
+    return e
+
+
+def copy_reactions(case, x, u, connectivity, subdomain):
+    """K_s u_s per node copy, assembled element by element over the subdomain copies of a
+    decomposed field (the HDF5 output: one row per copy, connectivity into the rows): the
+    internal forces of each subdomain. Summed over the copies of a node the gluing forces
+    cancel, so their sum over the face z = 0 is the total force the obstacle exerts."""
+    conn = np.asarray(connectivity)
+    young = element_young(case, subdomain)
+    r = np.zeros_like(u)
+    for value in np.unique(young):
+        sel = young == value
+        ke = element_stiffness(x[conn[sel]], value, case.poisson)
+        fe = np.einsum("eij,ej->ei", ke, u[conn[sel]].reshape(-1, 24)).reshape(-1, 8, 3)
+        np.add.at(r, conn[sel], fe)
+    return r
 
 
 def main():

@@ -240,6 +240,7 @@ def check_reference(outdir, case_file, groups, factor):
         u = h5["displacement"][...]
         xc = h5["contact_coordinates"][...]
         pc = h5["contact_pressure"][...]
+        gc = h5["contact_gap"][...]
     ijk, h = node_ijk(x, groups)
     idx = ref.mesh.node_index(ijk)
     check(len(x) >= ref.mesh.nn and set(idx.tolist()) == set(range(ref.mesh.nn)),
@@ -262,7 +263,66 @@ def check_reference(outdir, case_file, groups, factor):
         perr = np.abs(pc - p_ref).max() / pscale
         check(perr <= factor * tol, "max |p - p_ref| / max p_ref = %.3e <= %g tol (%.2f tol)"
               % (perr, factor, perr / tol))
+        # the deformed gap g + u_z of each contact node (docs/CASES.md), to the displacement bound
+        g_ref = ref.g[rows] + u_ref[ref.contact_nodes[rows], 2]
+        gerr = np.abs(gc - g_ref).max() / scale
+        check(gerr <= factor * tol, "max |gap - gap_ref| / max |u_ref| = %.3e <= %g tol (%.2f tol)"
+              % (gerr, factor, gerr / tol))
     return ref, nact
+
+
+def check_equilibrium(outdir, case_file, groups, log):
+    """The contact force a user reads (report.json, the log's summary line) against the bottom
+    reactions recomputed from the displacements by an assembly written for the test
+    (contact_reference.copy_reactions: the Q1 element stiffness of the reference, applied to
+    every subdomain copy of the HDF5 output): the sum over the copies of the nodes on z = 0 of
+    (K_s u_s)_z. Gluing forces cancel in that sum; what is left is the obstacle's force, exact
+    up to the subdomains' equilibrium, which the solver holds to its tol (G lambda = e): the
+    bound is KKT_FACTOR tol relative. Where the top face is free and carries a pressure, the
+    same force balances the load: p Lx Ly (the symmetry planes hold x and y only)."""
+    import contact_reference
+    tol = solver_tol(groups)
+    case = contact_reference.Case.read(case_file)
+    with fields(outdir) as h5:
+        x = h5["coordinates"][...]
+        u = h5["displacement"][...]
+        conn = h5["connectivity"][...]
+        sub = h5["subdomain"][...]
+    with open(os.path.join(outdir, "report.json")) as f:
+        reported = json.load(f)["contact"]["total_force"]
+    r = contact_reference.copy_reactions(case, x, u, conn, sub)
+    ijk, _ = node_ijk(x, groups)
+    bottom = ijk[:, 2] == 0
+    recomputed = r[bottom, 2].sum()
+    scale = max(abs(recomputed), 1e-300)
+    err = abs(reported - recomputed) / scale
+    print("equilibrium: reported force %.10e, recomputed from u %.10e" % (reported, recomputed))
+    check(recomputed > 0, "the recomputed contact force %.6e is a push (> 0)" % recomputed)
+    check(err <= KKT_FACTOR * tol, "report.json contact force = sum of the bottom reactions from u: "
+          "rel. difference %.3e <= %g tol" % (err, KKT_FACTOR))
+    # every bottom node off the contact rows carries no force (summed over its copies)
+    contact_keys = set()
+    with fields(outdir) as h5:
+        cijk, _ = node_ijk(h5["contact_coordinates"][...], groups)
+        contact_keys = {tuple(k) for k in cijk}
+    per_node = {}
+    for k, f in zip(map(tuple, ijk[bottom]), r[bottom, 2]):
+        per_node[k] = per_node.get(k, 0.0) + f
+    free = [abs(f) for k, f in per_node.items() if k not in contact_keys]
+    if free:
+        check(max(free) <= KKT_FACTOR * tol * scale, "bottom nodes off the obstacle carry no force: max %.3e" % max(free))
+    m = re.findall(r"contact force\s+([-+0-9.eE]+)", log)
+    check(len(m) >= 1, "the log states the contact force")
+    if m:
+        logged = float(m[-1])
+        check(abs(logged - recomputed) <= 1e-5 * scale + KKT_FACTOR * tol * scale,
+              "the log's contact force %.5e = the recomputed %.5e (5 digits)" % (logged, recomputed))
+    if not case.top_dirichlet and case.top_pressure != 0:
+        load = case.top_pressure * case.lengths[0] * case.lengths[1]
+        check(abs(recomputed - load) <= KKT_FACTOR * tol * load,
+              "the recomputed force balances the pressure: %.10e vs p Lx Ly = %.10e" % (recomputed, load))
+        check(abs(reported - load) <= KKT_FACTOR * tol * load,
+              "report.json's force balances the pressure: %.10e vs p Lx Ly = %.10e" % (reported, load))
 
 
 def check_kkt_failed(outdir, groups, log):
@@ -446,6 +506,7 @@ def check_hertz(outdir, groups):
     with fields(outdir) as h5:
         xc = h5["contact_coordinates"][...]
         pc = h5["contact_pressure"][...]
+        gc = h5["contact_gap"][...]
     _, h = node_ijk(xc, groups)
     area = np.full(len(xc), h[0] * h[1])
     for c in range(2):
@@ -607,6 +668,8 @@ def main():
             check_reference(outdir, path, groups, float(rest[0]))
         elif kind == "reference_partial":
             check_partly_active(*check_reference(outdir, path, groups, float(rest[0])))
+        elif kind == "equilibrium":
+            check_equilibrium(outdir, path, groups, out)
         elif kind == "monitor":
             check_monitor(outdir, out)
         elif kind == "no_monitor":
