@@ -51,7 +51,7 @@ module dual_preconditioner
   use kinds, only: dp, ip, i8, name_len
   use errors, only: fatal_error
   use timers, only: timer_start, timer_stop
-  use subdomain, only: subdomain_t
+  use subdomain, only: subdomain_t, stiffness_matvec
   use b_operator, only: b_operator_t
   use constraints, only: constraints_t, row_contact
   use schur_complement, only: schur_complement_t, stiffness_schur
@@ -329,7 +329,7 @@ contains
     else
       do ls = 1, size(this%subs, kind=ip)
         r = this%b%dof_range(ls)
-        call this%subs(ls)%K%matvec(this%xall(r(1):r(2)), this%yall(r(1):r(2)))
+        call stiffness_matvec(this%subs, ls, this%xall(r(1):r(2)), this%yall(r(1):r(2)))
       end do
     end if
     if (allocated(this%inv_wd)) then

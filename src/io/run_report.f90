@@ -103,13 +103,7 @@ contains
       call js%add_null('preconditioner_switch_estimate')
     end if
     call js%end_object()
-    call js%begin_object('kkt')
-    call js%add_each([character(len=16) :: 'equilibrium', 'gluing', 'dirichlet', 'penetration', 'equality', &
-                      'feasibility', 'dual_feasibility', 'complementarity'], &
-                     [sol%kkt%equilibrium, sol%kkt%gluing, sol%kkt%dirichlet, sol%kkt%penetration, sol%kkt%equality, &
-                      sol%kkt%feasibility, sol%kkt%dual_feasibility, sol%kkt%complementarity])
-    call js%add('passed', sol%kkt%worst() <= reconstruction%kkt_tol)
-    call js%end_object()
+    call add_kkt(js, sol, reconstruction%kkt_tol)
     call js%begin_object('reconstruction')
     call js%add('method', trim(reconstruction%method))
     if (sol%alpha_difference >= 0) then
@@ -160,6 +154,20 @@ contains
       end if
     end subroutine add_stat_max
   end subroutine write_run_report
+
+  !> report.json's `kkt`: the residuals of the primal KKT check and its verdict.
+  subroutine add_kkt(js, sol, kkt_tol)
+    type(json_writer_t), intent(inout) :: js
+    type(dual_solution_t), intent(in) :: sol
+    real(dp), intent(in) :: kkt_tol
+    call js%begin_object('kkt')
+    call js%add_each([character(len=16) :: 'equilibrium', 'gluing', 'dirichlet', 'penetration', 'equality', &
+                      'feasibility', 'dual_feasibility', 'complementarity'], &
+                     [sol%kkt%equilibrium, sol%kkt%gluing, sol%kkt%dirichlet, sol%kkt%penetration, sol%kkt%equality, &
+                      sol%kkt%feasibility, sol%kkt%dual_feasibility, sol%kkt%complementarity])
+    call js%add('passed', sol%kkt%worst() <= kkt_tol)
+    call js%end_object()
+  end subroutine add_kkt
 
   !> report.json's `coarse`: the coarse factorization of the run.
   subroutine add_coarse(js, op)

@@ -22,7 +22,7 @@
 module schur_complement
   use kinds, only: dp, ip, i8
   use errors, only: fatal_error
-  use subdomain, only: subdomain_t
+  use subdomain, only: subdomain_t, stiffness_matvec
   use mumps_wrapper, only: mumps_t
   use mpi_f08, only: MPI_COMM_SELF
   implicit none
@@ -57,7 +57,7 @@ contains
     logical, intent(in) :: on_interface(:)
     integer(ip), allocatable :: irn(:), jcn(:)
     real(dp), allocatable :: a(:)
-    integer(ip) :: s, i, k, j, o, nz
+    integer(ip) :: s, i, k, j, o, nz, ks
     integer(i8) :: nupper
 
     call this%free()
@@ -84,10 +84,11 @@ contains
     nupper = 0
     do s = 1, this%nblocks
       o = this%offset(s)
+      ks = k_owner(subs, s)
       do i = 1, subs(s)%ndof
         if (this%interior(o + i) == 0) cycle
-        do k = subs(s)%K%rowptr(i), subs(s)%K%rowptr(i + 1) - 1
-          j = subs(s)%K%colind(k)
+        do k = subs(ks)%K%rowptr(i), subs(ks)%K%rowptr(i + 1) - 1
+          j = subs(ks)%K%colind(k)
           if (this%interior(o + j) >= this%interior(o + i)) nupper = nupper + 1
         end do
       end do
@@ -96,15 +97,16 @@ contains
     nz = 0
     do s = 1, this%nblocks
       o = this%offset(s)
+      ks = k_owner(subs, s)
       do i = 1, subs(s)%ndof
         if (this%interior(o + i) == 0) cycle
-        do k = subs(s)%K%rowptr(i), subs(s)%K%rowptr(i + 1) - 1
-          j = subs(s)%K%colind(k)
+        do k = subs(ks)%K%rowptr(i), subs(ks)%K%rowptr(i + 1) - 1
+          j = subs(ks)%K%colind(k)
           if (this%interior(o + j) >= this%interior(o + i)) then
             nz = nz + 1
             irn(nz) = this%interior(o + i)
             jcn(nz) = this%interior(o + j)
-            a(nz) = subs(s)%K%values(k)
+            a(nz) = subs(s)%k_scale*subs(ks)%K%values(k)
           end if
         end do
       end do
@@ -134,7 +136,7 @@ contains
       do s = 1, this%nblocks
         r1 = this%offset(s) + 1
         r2 = this%offset(s + 1)
-        call subs(s)%K%matvec(this%v(r1:r2), this%t(r1:r2))
+        call stiffness_matvec(subs, s, this%v(r1:r2), this%t(r1:r2))
       end do
       do i = 1, this%ndof
         if (this%interior(i) > 0) this%wi(this%interior(i)) = this%t(i)
@@ -147,7 +149,7 @@ contains
     do s = 1, this%nblocks
       r1 = this%offset(s) + 1
       r2 = this%offset(s + 1)
-      call subs(s)%K%matvec(this%v(r1:r2), x(r1:r2))
+      call stiffness_matvec(subs, s, this%v(r1:r2), x(r1:r2))
     end do
     do i = 1, this%ndof
       if (this%interior(i) > 0) x(i) = 0
@@ -229,4 +231,13 @@ contains
     call sub%K%upper_coo(irn, jcn, a)
     call dense_schur(sub%ndof, irn, jcn, a, dofs, sd, flops)
   end subroutine stiffness_schur
+
+  !> The subdomain whose K subdomain `s` reads: its own, or its class
+  !> representative's (subdomain_t%k_of; times k_scale).
+  pure integer(ip) function k_owner(subs, s) result(ks)
+    type(subdomain_t), intent(in) :: subs(:)
+    integer(ip), intent(in) :: s
+    ks = s
+    if (subs(s)%k_of /= 0) ks = subs(s)%k_of
+  end function k_owner
 end module schur_complement

@@ -153,7 +153,7 @@ PRESSURE = """&mesh nsub = 2, 2, 2, nel = 3, 3, 3 /
 &material young = 2.1e5, poisson = 0.3 /
 &load top_pressure = {p!r} /
 &boundary top_dirichlet = .false., symmetry_x0 = .true., symmetry_y0 = .true. /
-&obstacle shape = 'sphere', radius = 20.0, gap = {gap!r} /
+&obstacle shape = 'sphere', radius = 20.0, gap = {gap!r}, mirror_images = .true. /
 &solver tol = {tol!r} /
 &output directory = '{out}', run_name = 'run' /
 """
