@@ -224,7 +224,7 @@ BLOCK = """&mesh nsub = {nsub}, {nsub}, {nsub}, nel = {nel}, {nel}, {nel} /
 &solver tol = 1e-8 /
 &reconstruction method = '{method}' /
 &output directory = '{out}', run_name = 'run', write_hdf5 = .false. /
-&history nsteps = 5, path = 'ramp', warm_start = {warm}, recycle = {warm} /
+&history nsteps = 5, path = 'ramp', warm_start = {warm}, recycle = {recycle} /
 """
 # a warm step on the face of the step before with the exact extrapolation: its start meets
 # the tolerance up to the two previous solves' errors (amplified at most 3x by the
@@ -234,11 +234,13 @@ BLOCK = """&mesh nsub = {nsub}, {nsub}, {nsub}, nel = {nel}, {nel}, {nel} /
 WARM_STEP_BOUND = 4
 
 
-def block_history(args, work, name, method, warm, nsub=2, nel=3):
+def block_history(args, work, name, method, warm, nsub=2, nel=3, recycle=None):
     out = os.path.join(work, name)
     nml = os.path.join(work, name + '.nml')
+    flag = lambda b: '.true.' if b else '.false.'
     with open(nml, 'w') as f:
-        f.write(BLOCK.format(method=method, out=out, warm='.true.' if warm else '.false.', nsub=nsub, nel=nel))
+        f.write(BLOCK.format(method=method, out=out, warm=flag(warm), recycle=flag(warm if recycle is None else recycle),
+                             nsub=nsub, nel=nel))
     run(args, nml)
     return json.load(open(os.path.join(out, 'report.json')))['history']
 
@@ -281,6 +283,14 @@ def check_savings(args):
         df = abs(a['total_force'] - c['total_force']) / abs(c['total_force'])
         assert df <= 1e3 * 1e-8, 'step %d: force %.17g (warm, faces reused) vs %.17g (cold)' % (
             a['step'], a['total_force'], c['total_force'])
+    # the scaled start of step 2 (lambda and muhat of step 1 times the ratio of the load factors):
+    # with a zero gap on the plane and every contact row active, lambda is linear in the load
+    # factor, so the start is step 2's solution to step 1's tolerance and the first check of the
+    # solve meets it (1 product). Without recycling, which would repair any start on this face.
+    plain = block_history(args, work, 'scaled', 'both', True, recycle=False)
+    hs = [r['hessian_multiplications'] for r in plain]
+    print('Hessian products per step, warm without recycling: %s' % hs)
+    assert hs[1] <= 1, 'the scaled start of step 2 is not its solution: %s' % hs
     print('savings: warm %d products after the first step against cold %d; faces reused %d' % (
         sum(hw[1:]), sum(hc[1:]), sum(reused)))
     # with G G^T factorized by MUMPS with the contact-face subdomains as Schur rows (216 subdomains,
