@@ -13,8 +13,12 @@ and a table of the two reconstructions beside the solve's face work:
   reconstruction's coarse assembly and factorization), not counting a timer
   inside another one already counted.
 
-Optional cases: --with-32768 (cube_h4_n32768, minutes and about 10 GB per
-rank) and --with-h2 (the hybrid H/h = 2 pair at 4096 and 32768).
+Optional cases: --with-32768 (cube_h4_n32768, minutes and up to 10 GB per
+rank), --with-h2 (the hybrid H/h = 2 pair at 4096 and 32768) and
+--clusters (cube_h4 at 512 and 4096 subdomains in clusters of 2^3 glued by
+their faces and by their corners, and with --with-32768 at 32768 glued by
+faces: the Hessian products, phases and peak memory of plain TFETI and of
+both gluings side by side).
 
   tools/coarse_targets.py --program build-release/bin/feticontact --reps 3 --dir D
 
@@ -34,9 +38,14 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 WEAK = os.path.join(ROOT, 'inputs', 'weak')
 
 
-def variant(src, dst, obstacle):
-    """Copy of the input `src` with its &obstacle line replaced (None: as is)."""
+def variant(src, dst, obstacle, mesh=None):
+    """Copy of the input `src` with its &obstacle line replaced (None: as is)
+    and `mesh` (variables) added to its &mesh group."""
     text = open(src).read()
+    if mesh is not None:
+        text, n = re.subn(r'^(&mesh[^\n]*?)\s*/\s*$', r'\1, ' + mesh + ' /', text, flags=re.M)
+        if n != 1:
+            sys.exit(f'coarse_targets: no single &mesh line in {src}')
     if obstacle is not None:
         text, n = re.subn(r'^&obstacle[^\n]*/\s*$', obstacle, text, flags=re.M)
         if n != 1:
@@ -47,16 +56,27 @@ def variant(src, dst, obstacle):
 
 
 def cases(args):
-    c = [('h4_n512', 'cube_h4_n512.nml', None, 512),
-         ('h4_n4096', 'cube_h4_n4096.nml', None, 4096),
-         ('h4_n4096_free', 'cube_h4_n4096.nml', "&obstacle shape = 'none' /", 4096),
-         ('h4_n4096_r50', 'cube_h4_n4096.nml',
-          "&obstacle shape = 'sphere', radius = 50.0, gap = 0.0 /", 4096)]
+    """(name, input, &obstacle line or None, subdomains, &mesh variables or None)"""
+    c = [('h4_n512', 'cube_h4_n512.nml', None, 512, None),
+         ('h4_n4096', 'cube_h4_n4096.nml', None, 4096, None)]
+    if not args.clusters_only:
+        c += [('h4_n4096_free', 'cube_h4_n4096.nml', "&obstacle shape = 'none' /", 4096, None),
+              ('h4_n4096_r50', 'cube_h4_n4096.nml',
+               "&obstacle shape = 'sphere', radius = 50.0, gap = 0.0 /", 4096, None)]
     if args.with_32768:
-        c.append(('h4_n32768', 'cube_h4_n32768.nml', None, 32768))
+        c.append(('h4_n32768', 'cube_h4_n32768.nml', None, 32768, None))
     if args.with_h2:
-        c += [('h2_n4096', 'cube_h2_n4096_hybrid.nml', None, 4096),
-              ('h2_n32768', 'cube_h2_n32768_hybrid.nml', None, 32768)]
+        c += [('h2_n4096', 'cube_h2_n4096_hybrid.nml', None, 4096, None),
+              ('h2_n32768', 'cube_h2_n32768_hybrid.nml', None, 32768, None)]
+    if args.clusters or args.clusters_only:
+        faces = "cluster = 2, 2, 2, cluster_gluing = 'faces'"
+        corners = "cluster = 2, 2, 2, cluster_gluing = 'corners'"
+        c += [('h4_n512_faces', 'cube_h4_n512.nml', None, 512, faces),
+              ('h4_n4096_faces', 'cube_h4_n4096.nml', None, 4096, faces),
+              ('h4_n512_corners', 'cube_h4_n512.nml', None, 512, corners),
+              ('h4_n4096_corners', 'cube_h4_n4096.nml', None, 4096, corners)]
+        if args.with_32768:
+            c.append(('h4_n32768_faces', 'cube_h4_n32768.nml', None, 32768, faces))
     return c
 
 
@@ -92,6 +112,7 @@ def run_case(args, name, nml, rep):
             if key in t:
                 rec[key] = t[key]['max']
         rec['products'] = r['solver']['hessian_multiplications']
+        rec['peak_gb'] = r['memory']['peak_rss_bytes']['max'] / 1e9
     return rec
 
 
@@ -103,6 +124,9 @@ def main():
     ap.add_argument('--dir', default='coarse_targets')
     ap.add_argument('--with-32768', action='store_true')
     ap.add_argument('--with-h2', action='store_true')
+    ap.add_argument('--clusters', action='store_true', help='also the clusters of 2^3 (faces and corners)')
+    ap.add_argument('--clusters-only', action='store_true',
+                    help='the plain and cluster runs at 512 and 4096 only (no obstacle variants)')
     args = ap.parse_args()
     args.program = os.path.abspath(args.program)
     os.makedirs(args.dir, exist_ok=True)
@@ -113,9 +137,9 @@ def main():
         env.setdefault('OMPI_ALLOW_RUN_AS_ROOT_CONFIRM', '1')
     env.setdefault('OMPI_MCA_rmaps_base_oversubscribe', '1')
     todo = []
-    for name, src, obstacle, nsub in cases(args):
+    for name, src, obstacle, nsub, mesh in cases(args):
         nml = os.path.join(args.dir, name + '.nml')
-        variant(os.path.join(WEAK, src), nml, obstacle)
+        variant(os.path.join(WEAK, src), nml, obstacle, mesh)
         todo.append((name, nml, nsub))
     records = []
     for rep in range(1, args.reps + 1):
@@ -125,18 +149,19 @@ def main():
             records.append(rec)
     med = {}
     nsubs = {name: nsub for name, _, nsub in todo}
-    print('\n| case | runs | total [s] | coarse work [s] | coarse share | polish | face: solves | products |')
-    print('|---|---:|---:|---:|---:|---:|---:|---:|')
+    print('\n| case | runs | total [s] | coarse work [s] | coarse share | polish | face: solves | products '
+          '| peak [GB/rank] |')
+    print('|---|---:|---:|---:|---:|---:|---:|---:|---:|')
     for name, _, _ in todo:
         ok = [r for r in records if r['case'] == name and 'total' in r]
         if not ok:
             print(f'| {name} | 0 (failed) | | | | | | |')
             continue
         m = {k: statistics.median(r.get(k, 0.0) for r in ok)
-             for k in ('total', 'coarse', 'polish', 'face: solves', 'products')}
+             for k in ('total', 'coarse', 'polish', 'face: solves', 'products', 'peak_gb')}
         med[name] = m
         print(f"| {name} | {len(ok)} | {m['total']:.3f} | {m['coarse']:.3f} | {m['coarse'] / m['total']:.0%} "
-              f"| {m['polish']:.3f} | {m['face: solves']:.3f} | {m['products']:.0f} |")
+              f"| {m['polish']:.3f} | {m['face: solves']:.3f} | {m['products']:.0f} | {m['peak_gb']:.2f} |")
 
     # the reconstruction with what the solve spent on face matrices beside it: the standard formula's
     # G_A G_A^T is a face matrix too, which the polish's faces already paid for
@@ -166,6 +191,14 @@ def main():
               f"(target <= 25%)")
     if 'h4_n32768' in med and 'h4_n4096' in med:
         print(f"total per subdomain, 32768 / 4096: {per_sub('h4_n32768', 'h4_n4096'):.2f}x (target <= 1.5x)")
+    for g in ('faces', 'corners'):
+        if f'h4_n512_{g}' in med and f'h4_n4096_{g}' in med:
+            print(f"clusters ({g}): total per subdomain, 4096 / 512: "
+                  f"{per_sub(f'h4_n4096_{g}', f'h4_n512_{g}'):.2f}x; against plain at 4096: "
+                  f"{med[f'h4_n4096_{g}']['total'] / med['h4_n4096']['total']:.2f}x")
+    if 'h4_n32768_faces' in med and 'h4_n4096_faces' in med:
+        print(f"clusters (faces): total per subdomain, 32768 / 4096: "
+              f"{per_sub('h4_n32768_faces', 'h4_n4096_faces'):.2f}x (target <= 1.3x)")
     if 'h2_n32768' in med and 'h2_n4096' in med:
         print(f"H/h = 2, total per subdomain, 32768 / 4096: {per_sub('h2_n32768', 'h2_n4096'):.2f}x "
               f"(target <= 1.1x)")
