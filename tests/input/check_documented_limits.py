@@ -25,7 +25,7 @@ import sys
 MIN_PROBED = 40
 # integer variables (an integer bound is probed with +-1)
 INTEGERS = {"nsub", "nel", "distortion_seed", "seed", "nsteps", "max_outer", "max_hessian", "rho_window",
-            "lanczos_steps", "polish_window", "polish_rounds", "polish_max", "polish_predict", "coarse_ranks",
+            "lanczos_steps", "lanczos_setup_steps", "polish_window", "polish_rounds", "polish_max", "polish_predict", "coarse_ranks",
             "metis_block", "cluster"}
 VECTORS = {"nsub", "nel", "lengths", "cluster", "top_displacement"}
 # not namelist variables (environment rows), and the lists of &history whose limits need other
