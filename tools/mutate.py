@@ -6,12 +6,12 @@ text occurring exactly once in the file) is applied alone to a scratch copy of t
 the scratch build is rebuilt (incremental, Release by default), a chosen CTest selection runs,
 and the file is restored. A fault is *caught* when a test of the selection that passes on the
 unmutated tree fails with it; it *survives* otherwise; a fault that does not compile is reported
-as such (not a valid fault). The scratch copy (default /tmp/feticontact-mutate) is made from the
+as such (not a valid fault). The scratch copy (default feticontact-mutate in the system's temporary folder) is made from the
 files git tracks in the working tree (committed or not) and kept between runs, so that a second
 run rebuilds only what a fault touches.
 
     tools/mutate.py -R 'app_reference|app_block_exact' --target feticontact
-    tools/mutate.py --only 'feti_.*gap' -L app -LE cluster --report /tmp/mutate.json
+    tools/mutate.py --only 'feti_.*gap' -L app -LE cluster --report mutate.json
     tools/mutate.py --list                       # the faults, nothing run
     tools/mutate.py --stop-on-failure ...        # a fault's tests end at the first that fails
 
@@ -26,6 +26,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -123,7 +124,8 @@ def main():
     ap.add_argument("--mutations", default=os.path.join(HERE, "mutations.txt"))
     ap.add_argument("--only", help="regex: only the faults whose label matches")
     ap.add_argument("--list", action="store_true", help="list the faults and check them, run nothing")
-    ap.add_argument("--scratch", default="/tmp/feticontact-mutate", help="scratch copy of the tree")
+    ap.add_argument("--scratch", default=os.path.join(tempfile.gettempdir(), "feticontact-mutate"),
+                    help="scratch copy of the tree")
     ap.add_argument("--build-type", default="Release")
     ap.add_argument("--target", action="append", default=[], help="build only these targets (repeatable)")
     ap.add_argument("--jobs", type=int, default=2, help="build jobs")
