@@ -935,20 +935,21 @@ contains
 
   !> The automatic choice of hybrid TFETI clusters (docs/INPUT.md `cluster`,
   !> docs/THEORY.md "Automatic choice of clusters"): plain TFETI or clusters
-  !> glued by faces, whichever a cost model of the run finds cheaper. With
-  !> N_u units (subdomains or clusters) of n_u dofs and H/h = the elements
-  !> along a unit's longest edge, a run costs about
-  !>   k(H/h) (a N_u n_u^(4/3) + b (6 N_u)^(4/3)) + c (6 N_u)^2
-  !> (Hessian products k(H/h) = 6 (1 + ln H/h), each with a sparse local
-  !> solve per unit and a coarse solve; the coarse factorization once; the
-  !> exponents of nested dissection in 3D, the constants measured on 2
-  !> ranks). Candidates: clusters of k subdomains per direction (1 where k
-  !> does not divide nsub_d), k = 2 .. 4, with at least `clusters_per_rank`
-  !> clusters per rank; clusters
-  !> are chosen when the cheapest candidate costs at most `margin` times
-  !> plain TFETI and there are at least `min_subdomains` subdomains (below,
-  !> the coarse problem costs too little to pay for anything). [1, 1, 1]
-  !> whenever a requirement fails; `reason` gives the model's inputs and verdict.
+  !> glued by faces, whichever a cost model of the run finds cheaper. N
+  !> subdomains of n dofs in N_u units (subdomains or clusters) of n_u dofs,
+  !> H/h = the elements along a unit's longest edge:
+  !>   k = c_k (H/h)^e                                    (Hessian products)
+  !>   T = N n k (v + a n_u^(1/3)) + k b (6 N_u)^(4/3) + cf (6 N_u)^2
+  !> (per product: vector work on every dof, a sparse solve per unit, a
+  !> coarse solve with the polish's face solves; once, G G^T's factorization;
+  !> the constants fitted by tools/cluster_model_fit.py on 2 ranks).
+  !> Candidates: clusters of k subdomains per direction (1 where k does not
+  !> divide nsub_d), k = 2 .. 4, with at least `clusters_per_rank` clusters
+  !> per rank; clusters are chosen when the cheapest candidate costs at most
+  !> `margin` times plain TFETI and there are at least `min_subdomains`
+  !> subdomains (below, the coarse problem costs too little to pay for
+  !> anything). [1, 1, 1] whenever a requirement fails; `reason` gives the
+  !> model's inputs and verdict.
   function auto_cluster(p, nranks, reason) result(c)
     type(params_t), intent(in) :: p
     integer, intent(in) :: nranks
@@ -956,7 +957,7 @@ contains
     integer(ip) :: c(3)
     integer(ip), parameter :: min_subdomains = 512, clusters_per_rank = 4, max_edge = 4
     !> the chosen clusters' cost at most this fraction of plain TFETI's (the model's error)
-    real(dp), parameter :: margin = 0.8_dp
+    real(dp), parameter :: margin = 0.9_dp
     integer(ip) :: k, t(3)
     real(dp) :: plain, best, cost
     c = 1
@@ -996,12 +997,16 @@ contains
     real(dp) function run_cost(nunits, t)
       integer(i8), intent(in) :: nunits
       integer(ip), intent(in) :: t(3)
-      real(dp), parameter :: a = 9.0e-9_dp, b = 1.45e-7_dp, cf = 1.1e-9_dp
-      real(dp) :: dofs, hh, products
-      dofs = 3*real(product(t), dp)*product(real(p%mesh%nel + 1, dp))
+      real(dp), parameter :: c_k = 5.65_dp, e = 0.653_dp
+      real(dp), parameter :: v = 7.9e-8_dp, a = 2.0e-9_dp, b = 2.08e-7_dp, cf = 1.53e-9_dp
+      real(dp) :: dofs, unit_dofs, hh, products, coarse_rows
+      dofs = 3*product(real(p%mesh%nel + 1, dp))*product(real(p%mesh%nsub, dp))
+      unit_dofs = 3*real(product(t), dp)*product(real(p%mesh%nel + 1, dp))
       hh = real(maxval(p%mesh%nel*t), dp)
-      products = 6*(1 + log(hh))
-      run_cost = products*(a*nunits*dofs**(4.0_dp/3) + b*(6.0_dp*nunits)**(4.0_dp/3)) + cf*(6.0_dp*nunits)**2
+      products = c_k*hh**e
+      coarse_rows = 6.0_dp*real(nunits, dp)
+      run_cost = dofs*products*(v + a*unit_dofs**(1.0_dp/3)) + products*b*coarse_rows**(4.0_dp/3) &
+                 + cf*coarse_rows**2
     end function run_cost
 
     !> The model's verdict in one line.
