@@ -29,13 +29,18 @@ module kkt
   use kinds, only: dp, ip, MPI_REAL_DP
   use feti_operators, only: feti_t, local_field_t
   use subdomain, only: subdomain_t, stiffness_matvec, stiffness_max_abs
-  use face_gluing, only: remove_gluing_forces
+  use face_gluing, only: gluing_gram, remove_gluing_forces
   use constraints, only: row_dirichlet, row_contact
   use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_IN_PLACE
   implicit none
   private
 
   public :: check_kkt
+
+  !> a factor of C C^T (face_gluing::gluing_gram), kept per class of clusters
+  type :: gram_t
+    real(dp), allocatable :: f(:, :)
+  end type gram_t
 
   type, public :: kkt_residuals_t
     real(dp) :: equilibrium = 0, gluing = 0, dirichlet = 0, penetration = 0, dual_feasibility = 0, &
@@ -75,6 +80,7 @@ contains
     type(local_field_t), allocatable :: btl(:)
     type(subdomain_t), pointer :: subs(:)
     real(dp), allocatable :: ku(:), bu(:), r(:), force(:), scale(:), rr(:)
+    type(gram_t), allocatable :: gram(:)
     integer(ip), allocatable :: kind(:)
     logical, allocatable :: contact(:)
     real(dp) :: mx(6), sm(2), e(4), umax, fmax
@@ -86,7 +92,7 @@ contains
     kind = op%row_kind()
     scale = op%force_scale()
     contact = op%is_contact()
-    allocate (btl(op%nlocal()), bu(n), r(n), force(n))
+    allocate (btl(op%nlocal()), bu(n), r(n), force(n), gram(op%nlocal()))
     call op%apply_bt(lambda, btl)
     ! U, then the per-subdomain equilibrium
     mx = 0
@@ -101,7 +107,7 @@ contains
         ! a cluster glued by faces is in equilibrium up to its face moments' forces C^T mu
         allocate (rr(sub%ndof))
         rr = ku - sub%f + btl(ls)%v
-        call remove_gluing_forces(sub, rr)
+        if (sub%C%nrows > 0) call remove_gluing_forces(sub, gram(gram_of(subs, ls, gram))%f, rr)
         e(1) = sum(rr**2)
         deallocate (rr)
         ! the subdomain's own forces, and at least the forces that a
@@ -140,6 +146,31 @@ contains
 
 
   !> a/b, with 0/0 = 0 and a/0 = huge for a > 0.
+  !> The local index whose gram(.)%f holds the factor of C C^T for cluster
+  !> `ls`: that of its class representative (k_of) when both have the same C
+  !> (congruent clusters do), formed on first use; else its own.
+  integer(ip) function gram_of(subs, ls, gram) result(g)
+    type(subdomain_t), intent(in) :: subs(:)
+    integer(ip), intent(in) :: ls
+    type(gram_t), intent(inout) :: gram(:)
+    g = ls
+    if (subs(ls)%k_of > 0) then
+      if (same_rows(subs(ls), subs(subs(ls)%k_of))) g = subs(ls)%k_of
+    end if
+    if (.not. allocated(gram(g)%f)) call gluing_gram(subs(g), gram(g)%f)
+  end function gram_of
+
+  !> Whether the gluing rows of a and b are the same matrix.
+  logical function same_rows(a, b)
+    type(subdomain_t), intent(in) :: a, b
+    same_rows = .false.
+    if (a%C%nrows /= b%C%nrows .or. b%C%nrows == 0) return
+    if (size(a%C%values) /= size(b%C%values)) return
+    if (any(a%C%rowptr /= b%C%rowptr)) return
+    if (any(a%C%colind /= b%C%colind)) return
+    same_rows = all(a%C%values == b%C%values)
+  end function same_rows
+
   pure real(dp) function ratio(a, b)
     real(dp), intent(in) :: a, b
     if (b > 0) then

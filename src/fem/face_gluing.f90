@@ -15,7 +15,7 @@ module face_gluing
   implicit none
   private
 
-  public :: build_face_gluing, remove_gluing_forces
+  public :: build_face_gluing, gluing_gram, remove_gluing_forces
 
 contains
 
@@ -140,35 +140,52 @@ contains
     b(2) = mod(r, dec%mesh%nsub(2))
     b(3) = r/dec%mesh%nsub(2)
   end function box_index
-  !> r <- r - C^T (C C^T)^{-1} C r for the gluing rows C of `sub`: the part of
-  !> a force vector that the face moments' multipliers cannot carry (the KKT
-  !> check's equilibrium of a cluster glued by faces: K u - f + B^T lambda =
-  !> -C^T mu). No change without rows.
-  subroutine remove_gluing_forces(sub, r)
+  !> The Cholesky factor (upper triangle) of C C^T for the gluing rows C of
+  !> `sub` (nc x nc; 0 x 0 without rows): what remove_gluing_forces takes,
+  !> the same for every cluster with the same C.
+  subroutine gluing_gram(sub, cct)
     type(subdomain_t), intent(in) :: sub
-    real(dp), intent(inout) :: r(:)
-    real(dp), allocatable :: cct(:, :), y(:, :), row(:)
+    real(dp), allocatable, intent(out) :: cct(:, :)
+    real(dp), allocatable :: row(:)
     integer(ip) :: i, j, k, nc
     integer :: info
     nc = sub%C%nrows
+    allocate (cct(nc, nc))
     if (nc == 0) return
-    allocate (cct(nc, nc), y(nc, 1), row(sub%ndof))
+    allocate (row(sub%ndof))
     row = 0
-    do i = 1, nc
-      associate (c => sub%C)
+    associate (c => sub%C)
+      do i = 1, nc
         row(c%colind(c%rowptr(i):c%rowptr(i + 1) - 1)) = c%values(c%rowptr(i):c%rowptr(i + 1) - 1)
-        do j = 1, nc
+        do j = i, nc
           cct(i, j) = 0
           do k = c%rowptr(j), c%rowptr(j + 1) - 1
             cct(i, j) = cct(i, j) + c%values(k)*row(c%colind(k))
           end do
         end do
         row(c%colind(c%rowptr(i):c%rowptr(i + 1) - 1)) = 0
-      end associate
-    end do
-    call sub%C%matvec(r, y(:, 1))
+      end do
+    end associate
     call dpotrf('U', nc, cct, nc, info)
-    if (info /= 0) call fatal_error('remove_gluing_forces: C C^T is not positive definite')
+    if (info /= 0) call fatal_error('gluing_gram: C C^T is not positive definite')
+  end subroutine gluing_gram
+
+  !> r <- r - C^T (C C^T)^{-1} C r for the gluing rows C of `sub`, `cct` the
+  !> factor of gluing_gram: the part of a force vector that the face
+  !> moments' multipliers cannot carry (the KKT check's equilibrium of a
+  !> cluster glued by faces: K u - f + B^T lambda = -C^T mu). No change
+  !> without rows.
+  subroutine remove_gluing_forces(sub, cct, r)
+    type(subdomain_t), intent(in) :: sub
+    real(dp), intent(in) :: cct(:, :)
+    real(dp), intent(inout) :: r(:)
+    real(dp), allocatable :: y(:, :)
+    integer(ip) :: i, k, nc
+    integer :: info
+    nc = sub%C%nrows
+    if (nc == 0) return
+    allocate (y(nc, 1))
+    call sub%C%matvec(r, y(:, 1))
     call dpotrs('U', nc, 1, cct, nc, y, nc, info)
     do i = 1, nc
       do k = sub%C%rowptr(i), sub%C%rowptr(i + 1) - 1
