@@ -148,7 +148,9 @@ contains
   !> a/b, with 0/0 = 0 and a/0 = huge for a > 0.
   !> The local index whose gram(.)%f holds the factor of C C^T for cluster
   !> `ls`: that of its class representative (k_of) when both have the same C
-  !> (congruent clusters do), formed on first use; else its own.
+  !> (congruent clusters do, up to the rounding of their coordinates: the
+  !> factor then differs by that rounding, far below what the check
+  !> measures), formed on first use; else its own.
   integer(ip) function gram_of(subs, ls, gram) result(g)
     type(subdomain_t), intent(in) :: subs(:)
     integer(ip), intent(in) :: ls
@@ -160,15 +162,17 @@ contains
     if (.not. allocated(gram(g)%f)) call gluing_gram(subs(g), gram(g)%f)
   end function gram_of
 
-  !> Whether the gluing rows of a and b are the same matrix.
+  !> Whether the gluing rows of a and b are the same matrix, to 1e-12 of its
+  !> largest entry.
   logical function same_rows(a, b)
     type(subdomain_t), intent(in) :: a, b
+    real(dp), parameter :: rel = 1e-12_dp
     same_rows = .false.
     if (a%C%nrows /= b%C%nrows .or. b%C%nrows == 0) return
     if (size(a%C%values) /= size(b%C%values)) return
     if (any(a%C%rowptr /= b%C%rowptr)) return
     if (any(a%C%colind /= b%C%colind)) return
-    same_rows = all(a%C%values == b%C%values)
+    same_rows = maxval(abs(a%C%values - b%C%values)) <= rel*maxval(abs(b%C%values))
   end function same_rows
 
   pure real(dp) function ratio(a, b)
