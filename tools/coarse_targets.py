@@ -19,8 +19,8 @@ clusters). Optional cases: --with-32768 (cube_h4_n32768, about 40 s and
 --reps times and cube_h3_n110592 once, about 9 GB per rank), --with-h2 (the
 hybrid H/h = 2 pair at 4096 and 32768) and --clusters (cube_h4 at 512 and
 4096 subdomains in plain TFETI and in clusters of 2^3 glued by their faces
-and by their corners, and with --with-32768 at 32768 glued by faces: the
-Hessian products, phases and peak memory side by side).
+and by their corners, and with --with-32768 the same at 32768, once each:
+the Hessian products, phases and peak memory side by side).
 
   tools/coarse_targets.py --program build-release/bin/feticontact --reps 3 --dir D
 
@@ -84,11 +84,13 @@ def cases(args):
               ('h4_n512_corners', 'cube_h4_n512.nml', None, 512, corners),
               ('h4_n4096_corners', 'cube_h4_n4096.nml', None, 4096, corners)]
         if args.with_32768:
-            c.append(('h4_n32768_faces', 'cube_h4_n32768.nml', None, 32768, faces))
+            c += [('h4_n32768_faces', 'cube_h4_n32768.nml', None, 32768, faces),
+                  ('h4_n32768_plain', 'cube_h4_n32768.nml', None, 32768, 'cluster = 1, 1, 1'),
+                  ('h4_n32768_corners', 'cube_h4_n32768.nml', None, 32768, corners)]
     return c
 
 
-ONCE = ('h4_n32768', 'h4_n32768_faces', 'h3_n110592', 'h2_n32768')
+ONCE = ('h4_n32768', 'h4_n32768_faces', 'h4_n32768_plain', 'h4_n32768_corners', 'h3_n110592', 'h2_n32768')
 
 
 def coarse_work(node):
