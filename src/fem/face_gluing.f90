@@ -10,7 +10,7 @@ module face_gluing
   use subdomain, only: subdomain_t
   use sorting, only: sort_permutation
   use csr_matrix, only: csr_from_coo
-  use rigid_modes, only: rigid_body_modes, orthonormalize
+  use rigid_modes, only: rigid_body_modes
   use lapack_interfaces, only: dpotrf, dpotrs
   implicit none
   private
@@ -32,8 +32,7 @@ contains
     type(subdomain_t), intent(inout) :: sub
     !> also 3 rows per pair sharing only an edge: the mean jump over its nodes
     logical, intent(in), optional :: edges
-    logical :: with_edges, pair_edges
-    character(len=16) :: mode
+    logical :: with_edges
     integer(ip) :: d(3), row0
     integer(i8), allocatable :: pkey(:)
     integer(ip), allocatable :: pa(:), pb(:), order(:), rows(:), cols(:)
@@ -45,13 +44,6 @@ contains
     if (any(sub%node_copy == 0)) call fatal_error('face_gluing: the cluster merges its corners')
     with_edges = .false.
     if (present(edges)) with_edges = edges
-    call get_environment_variable('FC_GLUE', mode)
-    if (len_trim(mode) == 0) mode = 'mean'
-    pair_edges = with_edges .and. (mode == 'mean' .or. mode == 'diag5')
-    if (mode == 'full') then
-      call build_full_gluing(sub)
-      return
-    end if
     base = int(dec%nsubdomains, i8) + 1
     ! (pair of subdomains, node copy in i, node copy in j) for every shared node of a face pair
     allocate (pkey(8*sub%nnodes), pa(8*sub%nnodes), pb(8*sub%nnodes))
@@ -66,7 +58,7 @@ contains
       do a = first, last
         do b = a + 1, last
           d = abs(box_index(dec, sub%node_copy(a)) - box_index(dec, sub%node_copy(b)))
-          if (.not. (sum(d) == 1 .or. (pair_edges .and. sum(d) == 2 .and. maxval(d) == 1))) cycle
+          if (.not. (sum(d) == 1 .or. (with_edges .and. sum(d) == 2 .and. maxval(d) == 1))) cycle
           np = np + 1
           pkey(np) = int(sub%node_copy(a), i8)*base + sub%node_copy(b)
           pa(np) = a
@@ -84,7 +76,7 @@ contains
         nf = nf + 1
       end if
     end do
-    allocate (rows(54*np + 240*sub%nnodes), cols(54*np + 240*sub%nnodes), vals(54*np + 240*sub%nnodes))
+    allocate (rows(36*np), cols(36*np), vals(36*np))
     nz = 0
     f = 0
     row0 = 0
@@ -102,34 +94,17 @@ contains
         ! a face: its 6 rigid-body moments
         x = sub%coords(:, pa(order(first:last)))
         if (allocated(q)) deallocate (q)
-        if (index(mode, 'a') > 0) then
-          call face_affine(x, d, q)
-        else
-          allocate (q(3*n, 6))
-          call rigid_body_modes(x, sum(x, dim=2)/n, q)
-        end if
+        allocate (q(3*n, 6))
+        call rigid_body_modes(x, sum(x, dim=2)/n, q)
         do k = 1, n
           do c = 1, 3
-            do r = 1, size(q, 2)
+            do r = 1, 6
               call push(row0 + r, 3*(pa(order(first + k - 1)) - 1) + c, q(3*(k - 1) + c, r))
               call push(row0 + r, 3*(pb(order(first + k - 1)) - 1) + c, -q(3*(k - 1) + c, r))
             end do
           end do
         end do
-        row0 = row0 + size(q, 2)
-      else if (mode == 'diag5') then
-        x = sub%coords(:, pa(order(first:last)))
-        if (allocated(q)) deallocate (q)
-        call edge_moments(x, q)
-        do k = 1, n
-          do c = 1, 3
-            do r = 1, size(q, 2)
-              call push(row0 + r, 3*(pa(order(first + k - 1)) - 1) + c, q(3*(k - 1) + c, r))
-              call push(row0 + r, 3*(pb(order(first + k - 1)) - 1) + c, -q(3*(k - 1) + c, r))
-            end do
-          end do
-        end do
-        row0 = row0 + size(q, 2)
+        row0 = row0 + 6
       else
         ! an edge: the mean jump of each component
         do k = 1, n
@@ -142,100 +117,8 @@ contains
       end if
       first = last + 1
     end do
-    if (with_edges .and. .not. pair_edges) call class_rows()
     call csr_from_coo(row0, sub%ndof, rows(1:nz), cols(1:nz), vals(1:nz), sub%C)
   contains
-    !> star rows over the classes of nodes with >= 3 copies in the cluster
-    !> (edges: 5 moments or 3 means; single nodes: 3 jumps when 'v' in mode)
-    subroutine class_rows()
-      integer(i8), allocatable :: ckey(:)
-      integer(ip), allocatable :: gfirst(:), glast(:), corder(:)
-      integer(ip) :: ng, g, lo, hi, m, j, kk, p0, s1, sj, pj, nn
-      real(dp), allocatable :: xc(:, :), qc(:, :)
-      allocate (ckey(sub%nnodes), gfirst(sub%nnodes), glast(sub%nnodes))
-      ng = 0
-      lo = 1
-      do while (lo <= sub%nnodes)
-        hi = lo
-        do while (hi < sub%nnodes)
-          if (sub%node_gid(hi + 1) /= sub%node_gid(lo)) exit
-          hi = hi + 1
-        end do
-        if (hi - lo + 1 >= 3) then
-          ng = ng + 1
-          gfirst(ng) = lo
-          glast(ng) = hi
-          ckey(ng) = int(minval(sub%node_copy(lo:hi)), i8)*base + maxval(sub%node_copy(lo:hi))
-        end if
-        lo = hi + 1
-      end do
-      call sort_permutation(ckey(1:ng), corder)
-      lo = 1
-      do while (lo <= ng)
-        hi = lo
-        do while (hi < ng)
-          if (ckey(corder(hi + 1)) /= ckey(corder(lo))) exit
-          hi = hi + 1
-        end do
-        nn = hi - lo + 1
-        g = corder(lo)
-        m = glast(g) - gfirst(g) + 1
-        if (allocated(qc)) deallocate (qc)
-        if (mode == 'edgenodes') then
-          allocate (qc(3*nn, 3*nn))
-          qc = 0
-          do kk = 1, 3*nn
-            qc(kk, kk) = 1
-          end do
-        else if (nn >= 2) then
-          allocate (xc(3, nn))
-          do kk = 1, nn
-            xc(:, kk) = sub%coords(:, gfirst(corder(lo + kk - 1)))
-          end do
-          if (index(mode, '5') > 0) then
-            call edge_moments(xc, qc)
-          else
-            allocate (qc(3*nn, 3))
-            qc = 0
-            do kk = 1, nn
-              do c = 1, 3
-                qc(3*(kk - 1) + c, c) = 1/sqrt(real(nn, dp))
-              end do
-            end do
-          end if
-          deallocate (xc)
-        else if (index(mode, 'v') > 0) then
-          allocate (qc(3, 3))
-          qc = 0
-          do c = 1, 3
-            qc(c, c) = 1
-          end do
-        else
-          lo = hi + 1
-          cycle
-        end if
-        ! star from the smallest copy: rows Q^T (u^s1 - u^sj), j = 2..m
-        s1 = minval(sub%node_copy(gfirst(g):glast(g)))
-        do j = 1, m
-          sj = sub%node_copy(gfirst(g) + j - 1)
-          if (sj == s1) cycle
-          do kk = 1, nn
-            p0 = gfirst(corder(lo + kk - 1))
-            pj = p0 + findloc(sub%node_copy(p0:glast(corder(lo + kk - 1))), sj, 1) - 1
-            p0 = p0 + findloc(sub%node_copy(p0:glast(corder(lo + kk - 1))), s1, 1) - 1
-            do c = 1, 3
-              do r = 1, size(qc, 2)
-                call push(row0 + r, 3*(p0 - 1) + c, qc(3*(kk - 1) + c, r))
-                call push(row0 + r, 3*(pj - 1) + c, -qc(3*(kk - 1) + c, r))
-              end do
-            end do
-          end do
-          row0 = row0 + size(qc, 2)
-        end do
-        lo = hi + 1
-      end do
-    end subroutine class_rows
-
     subroutine push(i, j, v)
       integer(ip), intent(in) :: i, j
       real(dp), intent(in) :: v
@@ -245,98 +128,6 @@ contains
       vals(nz) = v
     end subroutine push
   end subroutine build_face_gluing
-
-  !> The 5 rigid moments of an edge's nodes x (3, n >= 2), orthonormal: the
-  !> 3 translations and the 2 rotations about axes perpendicular to the edge.
-  subroutine edge_moments(x, q)
-    real(dp), intent(in) :: x(:, :)
-    real(dp), allocatable, intent(out) :: q(:, :)
-    real(dp) :: c(3), a(3), p(3, 2), d(3), e(3)
-    integer(ip) :: n, k, r
-    n = size(x, 2, kind=ip)
-    c = sum(x, dim=2)/n
-    a = x(:, n) - x(:, 1)
-    a = a/norm2(a)
-    e = 0
-    e(minloc(abs(a), 1)) = 1
-    p(:, 1) = e - dot_product(e, a)*a
-    p(:, 1) = p(:, 1)/norm2(p(:, 1))
-    p(:, 2) = [a(2)*p(3, 1) - a(3)*p(2, 1), a(3)*p(1, 1) - a(1)*p(3, 1), a(1)*p(2, 1) - a(2)*p(1, 1)]
-    allocate (q(3*n, 5))
-    q = 0
-    do k = 1, n
-      q(3*k - 2, 1) = 1
-      q(3*k - 1, 2) = 1
-      q(3*k, 3) = 1
-      d = x(:, k) - c
-      do r = 1, 2
-        q(3*k - 2:3*k, 3 + r) = [p(2, r)*d(3) - p(3, r)*d(2), p(3, r)*d(1) - p(1, r)*d(3), &
-                                 p(1, r)*d(2) - p(2, r)*d(1)]
-      end do
-    end do
-    call orthonormalize(q)
-  end subroutine edge_moments
-
-  !> The 9 affine moments of a face's nodes x (3, n): each component times
-  !> 1 and the two in-plane coordinates (the face normal: the axis where d = 1).
-  subroutine face_affine(x, d, q)
-    real(dp), intent(in) :: x(:, :)
-    integer(ip), intent(in) :: d(3)
-    real(dp), allocatable, intent(out) :: q(:, :)
-    real(dp) :: c(3)
-    integer(ip) :: n, k, comp, ax(2), j
-    n = size(x, 2, kind=ip)
-    c = sum(x, dim=2)/n
-    j = 0
-    do k = 1, 3
-      if (d(k) == 1) cycle
-      j = j + 1
-      ax(j) = k
-    end do
-    allocate (q(3*n, 9))
-    q = 0
-    do k = 1, n
-      do comp = 1, 3
-        q(3*(k - 1) + comp, 3*(comp - 1) + 1) = 1
-        q(3*(k - 1) + comp, 3*(comp - 1) + 2) = x(ax(1), k) - c(ax(1))
-        q(3*(k - 1) + comp, 3*(comp - 1) + 3) = x(ax(2), k) - c(ax(2))
-      end do
-    end do
-    call orthonormalize(q)
-  end subroutine face_affine
-
-  !> Every shared node of the cluster glued: 3 rows per copy after the
-  !> smallest, u^s1 - u^sj (the cluster assembled; the floor of any gluing).
-  subroutine build_full_gluing(sub)
-    type(subdomain_t), intent(inout) :: sub
-    integer(ip), allocatable :: rows(:), cols(:)
-    real(dp), allocatable :: vals(:)
-    integer(ip) :: lo, hi, j, c, nz, row0, p1
-    allocate (rows(6*sub%nnodes), cols(6*sub%nnodes), vals(6*sub%nnodes))
-    nz = 0
-    row0 = 0
-    lo = 1
-    do while (lo <= sub%nnodes)
-      hi = lo
-      do while (hi < sub%nnodes)
-        if (sub%node_gid(hi + 1) /= sub%node_gid(lo)) exit
-        hi = hi + 1
-      end do
-      p1 = lo + minloc(sub%node_copy(lo:hi), 1) - 1
-      do j = lo, hi
-        if (j == p1) cycle
-        do c = 1, 3
-          nz = nz + 1
-          rows(nz) = row0 + c; cols(nz) = 3*(p1 - 1) + c; vals(nz) = 1/sqrt(2.0_dp)
-          nz = nz + 1
-          rows(nz) = row0 + c; cols(nz) = 3*(j - 1) + c; vals(nz) = -1/sqrt(2.0_dp)
-        end do
-        row0 = row0 + 3
-      end do
-      lo = hi + 1
-    end do
-    call csr_from_coo(row0, sub%ndof, rows(1:nz), cols(1:nz), vals(1:nz), sub%C)
-  end subroutine build_full_gluing
 
   !> The box position (0-based, per direction) of subdomain `s` of `dec`.
   pure function box_index(dec, s) result(b)

@@ -16,7 +16,7 @@ module materials
   implicit none
   private
 
-  public :: matblock, block_young, node_copy_weight, subdomain_material
+  public :: subdomain_material
 
   !> Poisson's ratio from which the fully integrated Q1 draws a warning.
   real(dp), parameter :: nearly_incompressible = 0.45_dp
@@ -154,44 +154,6 @@ contains
     lines = ''
     write (lines, nml=material, delim='quote', iostat=status, iomsg=msg)
   end subroutine material_settings_write
-
-  !> HACK (floor measurement): the modulus of element (i,j,k) by the parity of
-  !> its block of FC_MATBLOCK elements, 0 when unset.
-  integer(ip) function matblock()
-    character(len=16) :: v
-    integer :: st
-    call get_environment_variable('FC_MATBLOCK', v)
-    matblock = 0
-    if (len_trim(v) > 0) read (v, *, iostat=st) matblock
-  end function matblock
-
-  real(dp) function block_young(material, e)
-    type(material_settings_t), intent(in) :: material
-    integer(ip), intent(in) :: e(3)
-    block_young = material%young*material%contrast**mod(sum(e/matblock()), 2)
-  end function block_young
-
-  !> HACK: E/young of a node's copy in subdomain s: the largest of its elements there.
-  real(dp) function node_copy_weight(material, dec, gid, s)
-    type(material_settings_t), intent(in) :: material
-    type(decomposition_t), intent(in) :: dec
-    integer(ip), intent(in) :: gid, s
-    integer(ip) :: gids(27), n, k, lo(3), r, sijk(3)
-    r = s - 1
-    sijk(1) = mod(r, dec%mesh%nsub(1))
-    r = r/dec%mesh%nsub(1)
-    sijk(2) = mod(r, dec%mesh%nsub(2))
-    sijk(3) = r/dec%mesh%nsub(2)
-    lo = sijk*dec%mesh%nel
-    call dec%mesh%elements_near(dec%mesh%node_ijk(gid), -1_ip, 0_ip, gids, n)
-    node_copy_weight = 0
-    do k = 1, n
-      associate (e => dec%mesh%element_ijk(gids(k)))
-        if (any(e < lo) .or. any(e >= lo + dec%mesh%nel)) cycle
-        node_copy_weight = max(node_copy_weight, block_young(material, e)/material%young)
-      end associate
-    end do
-  end function node_copy_weight
 
   !> Material of subdomain `id`.
   subroutine subdomain_material(material, dec, id, young, poisson)

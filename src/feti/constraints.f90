@@ -65,7 +65,7 @@ module constraints
   use sorting, only: sort_permutation, sort_unique
   use dual_exchange, only: dual_exchange_t
   use mpi_f08, only: MPI_Comm, MPI_Comm_rank, MPI_Allreduce, MPI_Exscan, MPI_SUM
-  use materials, only: subdomain_material, matblock, node_copy_weight
+  use materials, only: subdomain_material
   use clusters, only: node_copies, merges_corners
   implicit none
   private
@@ -214,11 +214,6 @@ contains
             j = findloc(copies(1:m), s_id, 1)
             owner = dec%subdomain_rank(copies(1))
             w(1:m) = sub_weight(copies(1:m))   ! E(s)/young with &solver scaling = 'young', else 1
-            if (matblock() > 0) then
-              do k = 1, m
-                w(k) = node_copy_weight(settings%material, dec, gid, copies(k))
-              end do
-            end if
             cslot = j
           end if
           do comp = 1, 3

@@ -13,7 +13,7 @@ submodule(feti_operators) feti_builder
   use face_gluing, only: build_face_gluing
   use assembly, only: assemble_subdomain, assemble_stiffness
   use subdomain_classes, only: subdomain_classes_t, start_classes, add_congruent, add_to_classes, finish_classes
-  use materials, only: subdomain_material, matblock, block_young
+  use materials, only: subdomain_material
   use ritz_values, only: tridiagonal_extremes
   use constraints, only: row_dirichlet
   use lapack_interfaces, only: dsyev
@@ -158,16 +158,6 @@ contains
       this%subs(ls)%element = settings%material%element_kind()
       if (this%hybrid .and. .not. merges_corners(settings%mesh) .and. settings%material%variation /= 'none') &
         call element_moduli(this, settings, this%subs(ls))
-      if (.not. this%hybrid .and. matblock() > 0) then
-        allocate (this%subs(ls)%elem_young(this%subs(ls)%nelem))
-        block
-          integer(ip) :: e
-          do e = 1, this%subs(ls)%nelem
-            this%subs(ls)%elem_young(e) = block_young(settings%material, &
-                                                      this%dec%mesh%element_ijk(this%subs(ls)%elem_gid(e)))
-          end do
-        end block
-      end if
       ! a cluster whose elements carry their own moduli is compared by its assembled K
       call add_congruent(this%subs, ls, classes, look .and. .not. allocated(this%subs(ls)%elem_young), found)
       call assemble_subdomain(settings%material, settings%load, this%dec, this%subs(ls), stiffness=.not. found)

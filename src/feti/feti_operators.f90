@@ -389,12 +389,10 @@ contains
         r = this%b%dof_range(ls)
         wd(r(1):r(2)) = weights(ls)
         if (.not. allocated(this%subs(ls)%elem_young)) cycle
-        wd(r(1):r(2)) = 0
         do e = 1, this%subs(ls)%nelem
           do a = 1, 8
             associate (n => this%subs(ls)%elem_nodes(a, e))
-              wd(r(1) + 3*(n - 1):r(1) + 3*n - 1) = max(wd(r(1) + 3*(n - 1):r(1) + 3*n - 1), &
-                weights(ls)*this%subs(ls)%elem_young(e)/this%subs(ls)%young)
+              wd(r(1) + 3*(n - 1):r(1) + 3*n - 1) = weights(ls)*this%subs(ls)%elem_young(e)/this%subs(ls)%young
             end associate
           end do
         end do
