@@ -1,10 +1,9 @@
 !> The gluing rows of a hybrid TFETI cluster glued by faces
 !> (`&mesh cluster_gluing = 'faces'`, docs/THEORY.md "Hybrid TFETI"): the
 !> shared nodes of a cluster fall into classes by the set of its subdomains
-!> that hold them (faces: 2, edges: 4, vertices: 8), and each class glues
-!> the copies of its nodes by moments of the jump: a face's affine moments, an
-!> edge's or a vertex's rigid moments. The cluster's K^+ (kplus) solves with
-!> K restricted to C u = 0.
+!> that hold them (a face: 2, an edge: 4, a vertex: 8), and each class glues
+!> the copies of its nodes by the rigid-body moments of their jumps. The
+!> cluster's K^+ (kplus) solves with K restricted to C u = 0.
 module face_gluing
   use kinds, only: dp, ip, i8
   use errors, only: fatal_error
@@ -30,24 +29,22 @@ module face_gluing
 contains
 
   !> sub%C of cluster `sub` (built by build_cluster without merging; `dec`
-  !> the subdomains). Its shared nodes in classes by the set of its subdomains
-  !> s_1 < ... < s_m holding them (a box of subdomains, named by s_1 and s_m):
-  !> m = 2 the nodes of a face that lie on no edge of the cluster's inner
-  !> edges, m = 4 those of an edge but its ends at inner vertices, m = 8 an inner
-  !> vertex. Per class the rows Q^T (u^s_1 - u^s_k), k = 2..m, over its nodes,
-  !> Q an orthonormal basis of (class_moments) a face's affine moments (each
-  !> component times 1 and the two in-plane coordinates: 9 rows, fewer on
-  !> fewer or collinear nodes) or an edge's or vertex's rigid moments (5 on a
-  !> straight edge, 3 on one node). Classes hold disjoint nodes and k picks
-  !> distinct copies, so C has full row rank. Classes in the order of (s_1,
-  !> s_m), nodes in ascending global number: congruent clusters get the same rows.
+  !> the subdomains). Its shared nodes in classes by the set of its
+  !> subdomains s_1 < ... < s_m holding them (a box of subdomains, named by
+  !> s_1 and s_m): m = 2 a face's nodes off the cluster's inner edges, m = 4
+  !> an inner edge's nodes off its inner vertices, m = 8 an inner vertex. Per
+  !> class the rows Q^T (u^s_1 - u^s_k), k = 2..m, over its nodes, Q an
+  !> orthonormal basis of the rigid-body moments there (class_moments: 6 on a
+  !> face, 5 on a straight edge, 3 on one node). Classes hold disjoint nodes
+  !> and each k another copy, so C has full row rank. Classes in the order of
+  !> (s_1, s_m), nodes ascending: congruent clusters get the same rows.
   subroutine build_face_gluing(dec, sub)
     type(decomposition_t), intent(in) :: dec
     type(subdomain_t), intent(inout) :: sub
     integer(i8), allocatable :: key(:)
     integer(ip), allocatable :: gfirst(:), order(:), nodes(:), pa(:), pb(:)
     real(dp), allocatable :: q(:, :)
-    integer(ip) :: ng, lo, hi, k, j, m, d(3)
+    integer(ip) :: ng, lo, hi, k, j, m
     integer(ip), allocatable :: copies(:)
     integer(i8) :: base
     type(gluing_rows_t) :: rows
@@ -80,8 +77,7 @@ contains
       m = same_node_last(sub, nodes(1)) - nodes(1) + 1
       copies = sub%node_copy(nodes(1):nodes(1) + m - 1)
       call sort_small(copies)
-      d = abs(box_index(dec, copies(m)) - box_index(dec, copies(1)))
-      call class_moments(sub%coords(:, nodes), d, q)
+      call class_moments(sub%coords(:, nodes), q)
       allocate (pa(size(nodes)), pb(size(nodes)))
       do k = 1, size(nodes, kind=ip)
         pa(k) = nodes(k) - 1 + findloc(sub%node_copy(nodes(k):nodes(k) + m - 1), copies(1), 1)
@@ -122,44 +118,28 @@ contains
     end do
   end subroutine sort_small
 
-  !> The moments of a class's nodes x (3, n) whose subdomains differ by d (box
-  !> steps per axis): a face (one axis differs, its normal) the affine
-  !> moments, each component times 1 and the two in-plane coordinates about
-  !> the centre; an edge or a vertex the rigid moments about the centre
-  !> (translations, rotations). q: an orthonormal basis of their span on these
-  !> nodes (columns that vanish or depend on the earlier ones dropped: the
-  !> rotation about a straight edge, the rotations at one node).
-  subroutine class_moments(x, d, q)
+  !> The rigid-body moments of a class's nodes x (3, n) about their centre
+  !> (translations, rotations): q an orthonormal basis of their span on these
+  !> nodes, columns that vanish or depend on the earlier ones dropped (6 on a
+  !> face; 5 on collinear nodes, a straight edge: the rotation about the line
+  !> moves none; 3 on one node: the jump itself).
+  subroutine class_moments(x, q)
     real(dp), intent(in) :: x(:, :)
-    integer(ip), intent(in) :: d(3)
     real(dp), allocatable, intent(out) :: q(:, :)
     real(dp), allocatable :: a(:, :)
     real(dp) :: c(3), e(3)
-    integer(ip) :: n, k, comp, ax(2)
+    integer(ip) :: n, k
     n = size(x, 2, kind=ip)
     c = sum(x, dim=2)/n
-    if (count(d /= 0) == 1) then
-      ax = pack([1_ip, 2_ip, 3_ip], d == 0)
-      allocate (a(3*n, 9))
-      a = 0
-      do k = 1, n
-        do comp = 1, 3
-          a(3*(k - 1) + comp, 3*comp - 2) = 1
-          a(3*(k - 1) + comp, 3*comp - 1) = x(ax(1), k) - c(ax(1))
-          a(3*(k - 1) + comp, 3*comp) = x(ax(2), k) - c(ax(2))
-        end do
-      end do
-    else
-      allocate (a(3*n, 6))
-      a = 0
-      do k = 1, n
-        e = x(:, k) - c
-        a(3*k - 2:3*k, 1:3) = reshape([1, 0, 0, 0, 1, 0, 0, 0, 1], [3, 3])
-        a(3*k - 2:3*k, 4) = [0.0_dp, -e(3), e(2)]
-        a(3*k - 2:3*k, 5) = [e(3), 0.0_dp, -e(1)]
-        a(3*k - 2:3*k, 6) = [-e(2), e(1), 0.0_dp]
-      end do
-    end if
+    allocate (a(3*n, 6))
+    a = 0
+    do k = 1, n
+      e = x(:, k) - c
+      a(3*k - 2:3*k, 1:3) = reshape([1, 0, 0, 0, 1, 0, 0, 0, 1], [3, 3])
+      a(3*k - 2:3*k, 4) = [0.0_dp, -e(3), e(2)]
+      a(3*k - 2:3*k, 5) = [e(3), 0.0_dp, -e(1)]
+      a(3*k - 2:3*k, 6) = [-e(2), e(1), 0.0_dp]
+    end do
     call independent_columns(a, q)
   end subroutine class_moments
 
@@ -225,17 +205,6 @@ contains
     self%nrows = self%nrows + size(q, 2, kind=ip)
   end subroutine add_jump
 
-  !> The box position (0-based, per direction) of subdomain `s` of `dec`.
-  pure function box_index(dec, s) result(b)
-    type(decomposition_t), intent(in) :: dec
-    integer(ip), intent(in) :: s
-    integer(ip) :: b(3), r
-    r = s - 1
-    b(1) = mod(r, dec%mesh%nsub(1))
-    r = r/dec%mesh%nsub(1)
-    b(2) = mod(r, dec%mesh%nsub(2))
-    b(3) = r/dec%mesh%nsub(2)
-  end function box_index
   !> r <- r - C^T (C C^T)^{-1} C r for the gluing rows C of `sub`: the part of
   !> a force vector that the face moments' multipliers cannot carry (the KKT
   !> check's equilibrium of a cluster glued by faces: K u - f + B^T lambda =
@@ -243,29 +212,58 @@ contains
   subroutine remove_gluing_forces(sub, r)
     type(subdomain_t), intent(in) :: sub
     real(dp), intent(inout) :: r(:)
-    real(dp), allocatable :: cct(:, :), y(:, :), row(:)
-    integer(ip) :: i, j, k, nc
+    real(dp), allocatable :: cct(:, :), y(:, :), tval(:)
+    integer(ip), allocatable :: tptr(:), trow(:), fill(:)
+    integer(ip) :: i, k, l, col, nc, first, reach, nb
     integer :: info
     nc = sub%C%nrows
     if (nc == 0) return
-    allocate (cct(nc, nc), y(nc, 1), row(sub%ndof))
-    row = 0
-    do i = 1, nc
-      associate (c => sub%C)
-        row(c%colind(c%rowptr(i):c%rowptr(i + 1) - 1)) = c%values(c%rowptr(i):c%rowptr(i + 1) - 1)
-        do j = 1, nc
-          cct(i, j) = 0
-          do k = c%rowptr(j), c%rowptr(j + 1) - 1
-            cct(i, j) = cct(i, j) + c%values(k)*row(c%colind(k))
-          end do
+    ! C^T by columns of C (the rows touching each dof), so that C C^T costs
+    ! the sum over dofs of the squared number of rows touching it
+    associate (c => sub%C)
+      allocate (tptr(sub%ndof + 1), fill(sub%ndof), trow(c%rowptr(nc + 1) - 1), tval(c%rowptr(nc + 1) - 1))
+      tptr = 0
+      do k = 1, c%rowptr(nc + 1) - 1
+        tptr(c%colind(k) + 1) = tptr(c%colind(k) + 1) + 1
+      end do
+      tptr(1) = 1
+      do col = 1, sub%ndof
+        tptr(col + 1) = tptr(col + 1) + tptr(col)
+      end do
+      fill = tptr(1:sub%ndof)
+      do i = 1, nc
+        do k = c%rowptr(i), c%rowptr(i + 1) - 1
+          trow(fill(c%colind(k))) = i
+          tval(fill(c%colind(k))) = c%values(k)
+          fill(c%colind(k)) = fill(c%colind(k)) + 1
         end do
-        row(c%colind(c%rowptr(i):c%rowptr(i + 1) - 1)) = 0
-      end associate
+      end do
+    end associate
+    allocate (cct(nc, nc), y(nc, 1))
+    cct = 0
+    do col = 1, sub%ndof
+      do k = tptr(col), tptr(col + 1) - 1
+        do l = tptr(col), tptr(col + 1) - 1
+          cct(trow(k), trow(l)) = cct(trow(k), trow(l)) + tval(k)*tval(l)
+        end do
+      end do
     end do
     call sub%C%matvec(r, y(:, 1))
-    call dpotrf('U', nc, cct, nc, info)
-    if (info /= 0) call fatal_error('remove_gluing_forces: C C^T is not positive definite')
-    call dpotrs('U', nc, 1, cct, nc, y, nc, info)
+    ! C C^T is block diagonal (rows of different classes share no dof): factor
+    ! and solve block by block, a block ending where no row couples beyond it
+    first = 1
+    reach = 0
+    do i = 1, nc
+      do k = 1, nc
+        if (cct(k, i) /= 0) reach = max(reach, k)
+      end do
+      if (reach > i) cycle
+      nb = i - first + 1
+      call dpotrf('U', nb, cct(first, first), nc, info)
+      if (info /= 0) call fatal_error('remove_gluing_forces: C C^T is not positive definite')
+      call dpotrs('U', nb, 1, cct(first, first), nc, y(first, 1), nc, info)
+      first = i + 1
+    end do
     do i = 1, nc
       do k = sub%C%rowptr(i), sub%C%rowptr(i + 1) - 1
         r(sub%C%colind(k)) = r(sub%C%colind(k)) - sub%C%values(k)*y(i, 1)
