@@ -29,7 +29,7 @@ module kkt
   use kinds, only: dp, ip, MPI_REAL_DP
   use feti_operators, only: feti_t, local_field_t
   use subdomain, only: subdomain_t, stiffness_matvec, stiffness_max_abs
-  use face_gluing, only: gluing_gram, remove_gluing_forces
+  use face_gluing, only: gluing_gram, gluing_gram_t, remove_gluing_forces
   use constraints, only: row_dirichlet, row_contact
   use mpi_f08, only: MPI_Allreduce, MPI_SUM, MPI_MAX, MPI_IN_PLACE
   implicit none
@@ -39,7 +39,8 @@ module kkt
 
   !> a factor of C C^T (face_gluing::gluing_gram), kept per class of clusters
   type :: gram_t
-    real(dp), allocatable :: f(:, :)
+    logical :: ready = .false.
+    type(gluing_gram_t) :: g
   end type gram_t
 
   type, public :: kkt_residuals_t
@@ -107,7 +108,7 @@ contains
         ! a cluster glued by faces is in equilibrium up to its face moments' forces C^T mu
         allocate (rr(sub%ndof))
         rr = ku - sub%f + btl(ls)%v
-        if (sub%C%nrows > 0) call remove_gluing_forces(sub, gram(gram_of(subs, ls, gram))%f, rr)
+        if (sub%C%nrows > 0) call remove_gluing_forces(sub, gram(gram_of(subs, ls, gram))%g, rr)
         e(1) = sum(rr**2)
         deallocate (rr)
         ! the subdomain's own forces, and at least the forces that a
@@ -146,7 +147,7 @@ contains
 
 
   !> a/b, with 0/0 = 0 and a/0 = huge for a > 0.
-  !> The local index whose gram(.)%f holds the factor of C C^T for cluster
+  !> The local index whose gram(.)%g holds the factor of C C^T for cluster
   !> `ls`: that of its class representative (k_of) when both have the same C
   !> (congruent clusters do, up to the rounding of their coordinates: the
   !> factor then differs by that rounding, far below what the check
@@ -159,7 +160,8 @@ contains
     if (subs(ls)%k_of > 0) then
       if (same_rows(subs(ls), subs(subs(ls)%k_of))) g = subs(ls)%k_of
     end if
-    if (.not. allocated(gram(g)%f)) call gluing_gram(subs(g), gram(g)%f)
+    if (.not. gram(g)%ready) call gluing_gram(subs(g), gram(g)%g)
+    gram(g)%ready = .true.
   end function gram_of
 
   !> Whether the gluing rows of a and b are the same matrix, to 1e-12 of its

@@ -219,10 +219,8 @@ contains
       if (this%hybrid) then
         call build_cluster(this%sub_dec, this%dec, this%dec%local_subdomains(ls), this%subs(ls), &
                            merge_corners=merges_corners(settings%mesh))
-        ! face moments and edge averages (the edges for checkerboards; with one
-        ! element across, a face's nodes are all on its edges: faces alone; docs/THEORY.md)
-        if (.not. merges_corners(settings%mesh)) &
-          call build_face_gluing(this%sub_dec, this%subs(ls), edges=all(settings%mesh%nel >= 2))
+        ! the moments of the jumps on its faces, edges and vertices (docs/THEORY.md)
+        if (.not. merges_corners(settings%mesh)) call build_face_gluing(this%sub_dec, this%subs(ls))
       else
         call build_subdomain(this%dec, this%dec%local_subdomains(ls), this%subs(ls))
       end if
