@@ -74,6 +74,7 @@ module dual_preconditioner
     real(dp), allocatable :: xall(:), yall(:)   !< work: concatenated primal vectors
     type(schur_complement_t) :: schur
     logical :: shared = .false.                 !< applied per class (class_operator)
+    logical :: by_parts = .false.               !< 'dirichlet' per class with one block per subdomain of a cluster
     integer(i8) :: shared_bytes = 0             !< the dense S_r and W ('dirichlet' per class)
     real(dp) :: setup_flops = 0                 !< MUMPS eliminations and LAPACK of the shared setup
     type(class_operator_t) :: shared_op
@@ -92,6 +93,7 @@ module dual_preconditioner
     procedure :: factor_bytes
     procedure :: setup_flop_count
     procedure :: is_shared
+    procedure :: is_by_parts
     procedure :: is_dense
     procedure :: free
   end type dual_preconditioner_t
@@ -179,9 +181,8 @@ contains
     real(dp), allocatable :: sd(:, :)
     real(dp) :: flops
     integer(ip) :: c, n, pc
-    logical :: by_parts
-    by_parts = subdomain_parts(subs, classes, parts)
-    if (by_parts) then
+    this%by_parts = subdomain_parts(subs, classes, parts)
+    if (this%by_parts) then
       call this%shared_op%init_parts(b, classes, classes%scale*this%inv_w**2, parts)
     else
       call this%shared_op%init(b, classes, classes%scale*this%inv_w**2)
@@ -192,7 +193,7 @@ contains
       call this%shared_op%class_dofs(b, c, dofs)
       n = size(dofs, kind=ip)
       if (n == 0) cycle
-      if (by_parts) then
+      if (this%by_parts) then
         pc = this%shared_op%parent_of_class(c)
         call part_schur(subs(classes%rep(pc)), parts(pc)%of, this%shared_op%part_of_class(c), dofs, sd, flops)
       else
@@ -503,6 +504,13 @@ contains
     is_dense = associated(this%fop)
   end function is_dense
 
+  !> 'dirichlet' per class of clusters glued by faces, one dense block per
+  !> subdomain of a cluster (class_operator%init_parts).
+  logical function is_by_parts(this)
+    class(dual_preconditioner_t), intent(in) :: this
+    is_by_parts = this%by_parts
+  end function is_by_parts
+
   logical function is_shared(this)
     class(dual_preconditioner_t), intent(in) :: this
     is_shared = this%shared
@@ -513,6 +521,7 @@ contains
     call this%schur%free()
     call this%shared_op%free()
     this%shared = .false.
+    this%by_parts = .false.
     this%shared_bytes = 0
     this%setup_flops = 0
     if (allocated(this%inv_w)) deallocate (this%inv_w)
