@@ -216,7 +216,6 @@ contains
     loose_at = target
     ctol = 0
     if (present(change_tol)) ctol = change_tol
-    self%margin = 0
     if (present(margin)) self%margin = margin
 
     known = .false.
@@ -343,6 +342,7 @@ contains
     self%aborted = .false.
     self%stopped_loose = .false.
     self%loose_counts = 0
+    self%margin = 0
     self%trusted = .false.
   end subroutine reset_run
 
