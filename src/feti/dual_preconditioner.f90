@@ -54,12 +54,12 @@ module dual_preconditioner
   use subdomain, only: subdomain_t, stiffness_matvec
   use b_operator, only: b_operator_t
   use constraints, only: constraints_t, row_contact
-  use schur_complement, only: schur_complement_t, stiffness_schur
+  use schur_complement, only: schur_complement_t, stiffness_schur, dense_schur
   use lapack_interfaces, only: dpotrf, dtrsm
-  use sorting, only: sort_unique
+  use sorting, only: sort_unique, binary_search
   use subdomain_classes, only: subdomain_classes_t
   use f_operator, only: f_operator_t
-  use class_operator, only: class_operator_t
+  use class_operator, only: class_operator_t, class_parts_t
   use csr_matrix, only: csr_t
   implicit none
   private
@@ -74,6 +74,7 @@ module dual_preconditioner
     real(dp), allocatable :: xall(:), yall(:)   !< work: concatenated primal vectors
     type(schur_complement_t) :: schur
     logical :: shared = .false.                 !< applied per class (class_operator)
+    logical :: by_parts = .false.               !< 'dirichlet' per class with one block per subdomain of a cluster
     integer(i8) :: shared_bytes = 0             !< the dense S_r and W ('dirichlet' per class)
     real(dp) :: setup_flops = 0                 !< MUMPS eliminations and LAPACK of the shared setup
     type(class_operator_t) :: shared_op
@@ -92,6 +93,7 @@ module dual_preconditioner
     procedure :: factor_bytes
     procedure :: setup_flop_count
     procedure :: is_shared
+    procedure :: is_by_parts
     procedure :: is_dense
     procedure :: free
   end type dual_preconditioner_t
@@ -163,38 +165,71 @@ contains
 
   !> 'dirichlet' per class: M_c = S_r, the dense Schur complement of K_r on
   !> U_c, a_s = c_s / w_s^2; the members that touch only a part a of U_c
-  !> get the extension X(e) = -S_ee^{-1} S_ea X(a) (see the module).
+  !> get the extension X(e) = -S_ee^{-1} S_ea X(a) (see the module). With
+  !> clusters glued by faces (units whose nodes are copies of several
+  !> subdomains, none merged) K_r is block diagonal over the subdomains of
+  !> the cluster, and so is S_r: one dense block per subdomain of the
+  !> class's clusters (class_operator%init_parts), from the subdomain's
+  !> block of K_r alone.
   subroutine init_shared_dirichlet(this, b, subs, classes)
     class(dual_preconditioner_t), intent(inout) :: this
     type(b_operator_t), intent(in) :: b
     type(subdomain_t), intent(in) :: subs(:)
     type(subdomain_classes_t), intent(in) :: classes
+    type(class_parts_t), allocatable :: parts(:)
+    integer(ip), allocatable :: dofs(:)
+    real(dp), allocatable :: sd(:, :)
+    real(dp) :: flops
+    integer(ip) :: c, n, pc
+    this%by_parts = subdomain_parts(subs, classes, parts)
+    if (this%by_parts) then
+      call this%shared_op%init_parts(b, classes, classes%scale*this%inv_w**2, parts)
+    else
+      call this%shared_op%init(b, classes, classes%scale*this%inv_w**2)
+    end if
+    flops = 0
+    this%shared_bytes = 0
+    do c = 1, this%shared_op%classes%nclass
+      call this%shared_op%class_dofs(b, c, dofs)
+      n = size(dofs, kind=ip)
+      if (n == 0) cycle
+      if (this%by_parts) then
+        pc = this%shared_op%parent_of_class(c)
+        call part_schur(subs(classes%rep(pc)), parts(pc)%of, this%shared_op%part_of_class(c), dofs, sd, flops)
+      else
+        call stiffness_schur(subs(this%shared_op%classes%rep(c)), dofs, sd, flops)
+      end if
+      call this%shared_op%set_matrix(c, sd)
+      this%shared_bytes = this%shared_bytes + 8*int(n, i8)*n
+      call add_extensions(this, c, n, sd, flops)
+    end do
+    this%setup_flops = flops
+    this%shared = .true.
+  end subroutine init_shared_dirichlet
+
+  !> The members of class `c` of the shared operator (n = n_c, sd = S_c)
+  !> that touch only a part a of U_c, grouped by a: X(e) = W X(a),
+  !> W = -S_ee^{-1} S_ea per group (one Cholesky of S_ee).
+  subroutine add_extensions(this, c, n, sd, flops)
+    class(dual_preconditioner_t), intent(inout) :: this
+    integer(ip), intent(in) :: c, n
+    real(dp), intent(in) :: sd(:, :)
+    real(dp), intent(inout) :: flops
     type :: group_t
       integer(ip), allocatable :: a(:), cols(:)
     end type group_t
     type(group_t), allocatable :: groups(:), tmp(:)
-    integer(ip), allocatable :: dofs(:), pos(:), e(:), cols(:)
+    integer(ip), allocatable :: pos(:), e(:), cols(:)
     logical, allocatable :: in_a(:)
-    real(dp), allocatable :: sd(:, :), see(:, :), w(:, :)
-    real(dp) :: flops
-    integer(ip) :: c, r, n, kk, s, np, ng, g, na, ne, i
+    real(dp), allocatable :: see(:, :), w(:, :)
+    integer(ip) :: kk, s, np, ng, g, na, ne, i
     integer :: info
-    call this%shared_op%init(b, classes, classes%scale*this%inv_w**2)
-    flops = 0
-    this%shared_bytes = 0
-    do c = 1, classes%nclass
-      r = classes%rep(c)
-      call this%shared_op%class_dofs(b, c, dofs)
-      n = size(dofs, kind=ip)
-      if (n == 0) cycle
-      call stiffness_schur(subs(r), dofs, sd, flops)
-      call this%shared_op%set_matrix(c, sd)
-      this%shared_bytes = this%shared_bytes + 8*int(n, i8)*n
+    associate (cl => this%shared_op%classes)
       ! the members by the positions in U_c their B^_s touch
       allocate (groups(4))
       ng = 0
-      do kk = classes%moff(c) + 1, classes%moff(c + 1)
-        s = classes%member(kk)
+      do kk = cl%moff(c) + 1, cl%moff(c + 1)
+        s = cl%member(kk)
         pos = this%shared_op%edof(this%shared_op%eoff(s) + 1:this%shared_op%eoff(s + 1))
         call sort_unique(pos, np)
         if (np == n) cycle
@@ -212,34 +247,88 @@ contains
           groups(ng)%a = pos(1:np)
           allocate (groups(ng)%cols(0))
         end if
-        groups(g)%cols = [groups(g)%cols, kk - classes%moff(c)]
+        groups(g)%cols = [groups(g)%cols, kk - cl%moff(c)]
       end do
-      do g = 1, ng
-        na = size(groups(g)%a, kind=ip)
-        allocate (in_a(n))
-        in_a = .false.
-        in_a(groups(g)%a) = .true.
-        e = pack([(i, i=1, n)], .not. in_a)
-        ne = size(e, kind=ip)
-        see = sd(e, e)
-        w = sd(e, groups(g)%a)
-        call dpotrf('U', ne, see, ne, info)
-        if (info /= 0) call fatal_error('dual_preconditioner: S_ee of a class is not positive definite '// &
-                                        '(a subdomain whose touched dofs do not hold its rigid body motions)')
-        ! W = -S_ee^{-1} S_ea = -U^{-1} U^{-T} S_ea
-        call dtrsm('L', 'U', 'T', 'N', ne, na, -1.0_dp, see, ne, w, ne)
-        call dtrsm('L', 'U', 'N', 'N', ne, na, 1.0_dp, see, ne, w, ne)
-        flops = flops + real(ne, dp)**3/3 + 2*real(ne, dp)**2*na
-        cols = groups(g)%cols
-        call this%shared_op%add_extension(c, cols, groups(g)%a, e, w)
-        this%shared_bytes = this%shared_bytes + 8*int(ne, i8)*na
-        deallocate (in_a)
-      end do
-      deallocate (groups)
+    end associate
+    do g = 1, ng
+      na = size(groups(g)%a, kind=ip)
+      allocate (in_a(n))
+      in_a = .false.
+      in_a(groups(g)%a) = .true.
+      e = pack([(i, i=1, n)], .not. in_a)
+      ne = size(e, kind=ip)
+      see = sd(e, e)
+      w = sd(e, groups(g)%a)
+      call dpotrf('U', ne, see, ne, info)
+      if (info /= 0) call fatal_error('dual_preconditioner: S_ee of a class is not positive definite '// &
+                                      '(a subdomain whose touched dofs do not hold its rigid body motions)')
+      ! W = -S_ee^{-1} S_ea = -U^{-1} U^{-T} S_ea
+      call dtrsm('L', 'U', 'T', 'N', ne, na, -1.0_dp, see, ne, w, ne)
+      call dtrsm('L', 'U', 'N', 'N', ne, na, 1.0_dp, see, ne, w, ne)
+      flops = flops + real(ne, dp)**3/3 + 2*real(ne, dp)**2*na
+      cols = groups(g)%cols
+      call this%shared_op%add_extension(c, cols, groups(g)%a, e, w)
+      this%shared_bytes = this%shared_bytes + 8*int(ne, i8)*na
+      deallocate (in_a)
     end do
-    this%setup_flops = flops
-    this%shared = .true.
-  end subroutine init_shared_dirichlet
+  end subroutine add_extensions
+
+  !> The split of every class representative's dofs by the subdomain whose
+  !> copy each node is (subdomain_t%node_copy: clusters glued by faces), in
+  !> the order of the subdomain ids; false (no parts) unless every
+  !> representative is such a cluster.
+  logical function subdomain_parts(subs, classes, parts) result(yes)
+    type(subdomain_t), intent(in) :: subs(:)
+    type(subdomain_classes_t), intent(in) :: classes
+    type(class_parts_t), allocatable, intent(out) :: parts(:)
+    integer(ip), allocatable :: ids(:)
+    integer(ip) :: c, a, n
+    yes = .false.
+    do c = 1, classes%nclass
+      associate (rep => subs(classes%rep(c)))
+        if (.not. allocated(rep%node_copy)) return
+        if (any(rep%node_copy < 1)) return
+      end associate
+    end do
+    allocate (parts(classes%nclass))
+    do c = 1, classes%nclass
+      associate (rep => subs(classes%rep(c)))
+        ids = rep%node_copy
+        call sort_unique(ids, n)
+        allocate (parts(c)%of(rep%ndof))
+        do a = 1, rep%nnodes
+          parts(c)%of(3*a - 2:3*a) = binary_search(ids(1:n), rep%node_copy(a))
+        end do
+      end associate
+    end do
+    yes = .true.
+  end function subdomain_parts
+
+  !> sd = the dense Schur complement on `dofs` (the unit's local dofs, all of
+  !> part `p` of `part_of`) of the block of K of `sub` on the dofs of part p.
+  subroutine part_schur(sub, part_of, p, dofs, sd, flops)
+    type(subdomain_t), intent(in) :: sub
+    integer(ip), intent(in) :: part_of(:), p, dofs(:)
+    real(dp), allocatable, intent(out) :: sd(:, :)
+    real(dp), intent(inout) :: flops
+    integer(ip), allocatable :: irn(:), jcn(:), loc(:), keep(:)
+    real(dp), allocatable :: a(:)
+    integer(ip) :: i, nb
+    call sub%K%upper_coo(irn, jcn, a)
+    allocate (loc(sub%ndof))
+    loc = 0
+    nb = 0
+    do i = 1, sub%ndof
+      if (part_of(i) /= p) cycle
+      nb = nb + 1
+      loc(i) = nb
+    end do
+    if (any(loc(dofs) == 0)) call fatal_error('dual_preconditioner: a touched dof outside its part')
+    keep = pack([(i, i=1, size(irn, kind=ip))], loc(irn) > 0 .and. loc(jcn) > 0)
+    if (any(loc(irn) > 0 .neqv. loc(jcn) > 0)) &
+      call fatal_error('dual_preconditioner: K couples two parts of a cluster glued by faces')
+    call dense_schur(nb, loc(irn(keep)), loc(jcn(keep)), a(keep), loc(dofs), sd, flops)
+  end subroutine part_schur
 
   !> 'lumped' per class: M_c = K_r(U_c, U_c) in CSR, a_s = c_s / w_s^2.
   subroutine init_shared(this, b, subs, classes)
@@ -415,6 +504,13 @@ contains
     is_dense = associated(this%fop)
   end function is_dense
 
+  !> 'dirichlet' per class of clusters glued by faces, one dense block per
+  !> subdomain of a cluster (class_operator%init_parts).
+  logical function is_by_parts(this)
+    class(dual_preconditioner_t), intent(in) :: this
+    is_by_parts = this%by_parts
+  end function is_by_parts
+
   logical function is_shared(this)
     class(dual_preconditioner_t), intent(in) :: this
     is_shared = this%shared
@@ -425,6 +521,7 @@ contains
     call this%schur%free()
     call this%shared_op%free()
     this%shared = .false.
+    this%by_parts = .false.
     this%shared_bytes = 0
     this%setup_flops = 0
     if (allocated(this%inv_w)) deallocate (this%inv_w)

@@ -138,6 +138,7 @@ module feti_operators
     procedure :: local_ordering
     procedure :: local_solver
     procedure :: dirichlet_from_factors
+    procedure :: dirichlet_by_blocks
     procedure :: f_shared
     procedure :: f_classes
     procedure :: f_local_operator
@@ -411,6 +412,31 @@ contains
     call MPI_Allreduce(MPI_IN_PLACE, ready, 1, MPI_INTEGER, MPI_MIN, this%communicator, ierr)
     dirichlet_from_factors = ready == 1
   end function dirichlet_from_factors
+
+  !> True when the Dirichlet preconditioner is applied per class of clusters
+  !> glued by faces, one dense Schur block per subdomain of the cluster
+  !> (dual_preconditioner: set up with one small elimination per block of a
+  !> class, applied by one dgemm per block of a class), on every rank: the
+  !> clusters are shared per class, with one modulus per cluster. Collective.
+  logical function dirichlet_by_blocks(this)
+    class(feti_t), intent(in) :: this
+    integer :: ready, ierr
+    integer(ip) :: ls
+    ready = 0
+    if (this%hybrid .and. this%f%is_shared() .and. this%n_local_subs > 0) then
+      ready = 1
+      do ls = 1, this%n_local_subs
+        if (this%young_rows .and. allocated(this%subs(ls)%elem_young)) ready = 0
+        if (.not. allocated(this%subs(ls)%node_copy)) then
+          ready = 0
+        else if (any(this%subs(ls)%node_copy < 1)) then
+          ready = 0
+        end if
+      end do
+    end if
+    call MPI_Allreduce(MPI_IN_PLACE, ready, 1, MPI_INTEGER, MPI_MIN, this%communicator, ierr)
+    dirichlet_by_blocks = ready == 1
+  end function dirichlet_by_blocks
 
   ! ---- accessors ----
 

@@ -15,7 +15,7 @@
 !> once; with `release` active rows whose gradient has the wrong sign are
 !> also freed (primal-dual active set rounds); with `loose` > 0 a face solve
 !> that may be followed by another round stops at its loose check when the
-!> set would change (face_solve); with `predict` > 0 a round that projected
+!> set would change beyond `loose_margin` times its residual (face_solve); with `predict` > 0 a round that projected
 !> at least that many rows and released none also makes as many of the free
 !> rows nearest their bound active (predicted_rows); with `release_share` > 0
 !> the first round of a polish releases only the wrong-sign rows whose
@@ -84,6 +84,9 @@ module active_set_polish
     real(dp) :: release_share = 0.5_dp
     !> polish before the first outer iteration from every bounded row at its bound
     logical :: first = .true.
+    !> >= 0: a loose check counts a row only when its violation exceeds this many times the
+    !> face residual's measure there (0: every violation)
+    real(dp) :: loose_margin = 0.3_dp
   contains
     procedure :: check => polish_settings_check
     procedure :: group => polish_settings_group
@@ -169,6 +172,10 @@ contains
       variable = 'polish_predict'
       rule = 'must be >= 0 (0: off)'
       write (buf, '(i0)') self%predict
+    else if (.not. (self%loose_margin >= 0 .and. self%loose_margin <= huge(1.0_dp))) then
+      variable = 'polish_loose_margin'
+      rule = 'must be >= 0 (0: every violation counts)'
+      write (buf, '(g0.6)') self%loose_margin
     else if (.not. (self%release_share >= 0 .and. self%release_share < 1)) then
       variable = 'polish_release_share'
       rule = 'must be in [0, 1) (0: release every wrong-sign row at once)'
@@ -190,7 +197,7 @@ contains
     character(len=name_len), allocatable, intent(out) :: names(:)
     names = [character(len=name_len) :: 'polish_window', 'polish_rounds', 'polish_max', &
         'polish_release', 'polish_settle', 'polish_loose', 'polish_predict', 'polish_release_share', &
-        'polish_first']
+        'polish_first', 'polish_loose_margin']
   end subroutine polish_settings_variables
 
   !> Read the settings' variables from the namelist group text `group`
@@ -201,20 +208,22 @@ contains
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
     integer(ip) :: polish_window, polish_rounds, polish_predict, polish_max
-    real(dp) :: polish_settle, polish_loose, polish_release_share
+    real(dp) :: polish_settle, polish_loose, polish_release_share, polish_loose_margin
     logical :: polish_release, polish_first
     namelist /solver/ polish_window, polish_rounds, polish_max, polish_release, polish_settle, polish_loose, &
-      polish_predict, polish_release_share, polish_first
+      polish_predict, polish_release_share, polish_first, polish_loose_margin
     polish_max = self%max_count
     polish_window = self%window; polish_rounds = self%rounds; polish_release = self%release
     polish_settle = self%settle; polish_loose = self%loose; polish_predict = self%predict
     polish_release_share = self%release_share; polish_first = self%first
+    polish_loose_margin = self%loose_margin
     read (group, nml=solver, iostat=status, iomsg=msg)
     if (status /= 0) return
     self%max_count = polish_max
     self%window = polish_window; self%rounds = polish_rounds; self%release = polish_release
     self%settle = polish_settle; self%loose = polish_loose; self%predict = polish_predict
     self%release_share = polish_release_share; self%first = polish_first
+    self%loose_margin = polish_loose_margin
   end subroutine polish_settings_read
 
   !> Write the settings as the namelist group '&solver ... /'.
@@ -224,14 +233,15 @@ contains
     integer, intent(out) :: status
     character(len=*), intent(out) :: msg
     integer(ip) :: polish_window, polish_rounds, polish_predict, polish_max
-    real(dp) :: polish_settle, polish_loose, polish_release_share
+    real(dp) :: polish_settle, polish_loose, polish_release_share, polish_loose_margin
     logical :: polish_release, polish_first
     namelist /solver/ polish_window, polish_rounds, polish_max, polish_release, polish_settle, polish_loose, &
-      polish_predict, polish_release_share, polish_first
+      polish_predict, polish_release_share, polish_first, polish_loose_margin
     polish_max = self%max_count
     polish_window = self%window; polish_rounds = self%rounds; polish_release = self%release
     polish_settle = self%settle; polish_loose = self%loose; polish_predict = self%predict
     polish_release_share = self%release_share; polish_first = self%first
+    polish_loose_margin = self%loose_margin
     lines = ''
     write (lines, nml=solver, delim='quote', iostat=status, iomsg=msg)
   end subroutine polish_settings_write
@@ -509,7 +519,7 @@ contains
       self%face%monitor%polish = self%n_polish
       self%face%monitor%round = rounds
       call self%face%run(problem, self%free_now, x, g, muhat, polish_target*tol_gp, per_component, budget, loose, &
-                         change_tol, budget_trusted, g_known)
+                         change_tol, budget_trusted, g_known, self%settings%loose_margin)
       call problem%face%release()
       cut_short(rounds) = self%face%stopped_loose
       self%n_rounds = self%n_rounds + 1

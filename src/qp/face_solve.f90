@@ -38,7 +38,10 @@
 !> SMALBE's polish rounds), the run pauses once the measure of r first drops below it and
 !> counts the rows whose status the face solution would change (face_changes:
 !> free rows below their bound, active rows whose Lagrangian gradient
-!> g + C^T mu has the wrong sign); if there are any it stops there
+!> g + C^T mu has the wrong sign; with `margin` > 0 only rows beyond margin
+!> times the current measure of r count: an iterate's error is at least
+!> about its residual, ||A|| ~ 1, so a smaller violation is not yet
+!> decided); if there are any it stops there
 !> (`stopped_loose`: x, g, muhat a face iterate, not the face solution),
 !> else the same CG run goes on (no restart, no Krylov space lost) and checks
 !> again each time the measure has dropped by another factor `loose`.
@@ -94,6 +97,7 @@ module face_solve
     !> a loose check found no change: not given up any more, budget max_steps_trusted
     logical :: trusted = .false.
     integer(ip) :: loose_counts(2) = 0   !< face_changes at the loose check (0 when not checked)
+    real(dp) :: margin = 0               !< the loose checks' margin of the last run (times the measure of r)
     type(solver_monitor_t) :: monitor    !< the caller's monitor: one line per CG step
     !> the directions of earlier runs (when `recycle%on`): a Galerkin start on a face that holds them
     type(face_recycle_t) :: recycle
@@ -121,25 +125,35 @@ contains
   !> The rows whose status a face iterate would change, summed over ranks:
   !> counts(1) free rows (bounded) with x_i < l_i, counts(2) active rows whose
   !> gradient glag (of the Lagrangian, face multiplier included) has the wrong
-  !> sign beyond tol: w_i glag_i < -tol (w = stop_weight, 1 without).
-  !> Collective.
-  function face_changes(problem, free, x, glag, tol) result(counts)
+  !> sign beyond tol: w_i glag_i < -tol (w = stop_weight, 1 without). With
+  !> margin (optional, >= 0) a row counts only beyond it: w_i (l_i - x_i) >
+  !> margin, w_i glag_i < -max(tol, margin). Collective.
+  function face_changes(problem, free, x, glag, tol, margin) result(counts)
     class(qp_problem_t), intent(in) :: problem
     logical, intent(in) :: free(:)
     real(dp), intent(in) :: x(:), glag(:)
     real(dp), intent(in) :: tol
+    real(dp), intent(in), optional :: margin
     integer(ip) :: counts(2), local(2), i
     integer :: ierr
-    real(dp) :: wi
+    real(dp) :: wi, m
+    m = 0
+    if (present(margin)) m = margin
     local = 0
     do i = 1, problem%n
       if (problem%lower(i) <= no_lower_bound) cycle
       if (free(i)) then
-        if (x(i) < problem%lower(i)) local(1) = local(1) + 1
+        if (m > 0) then
+          wi = 1
+          if (allocated(problem%stop_weight)) wi = problem%stop_weight(i)
+          if (wi*(problem%lower(i) - x(i)) > m) local(1) = local(1) + 1
+        else
+          if (x(i) < problem%lower(i)) local(1) = local(1) + 1
+        end if
       else
         wi = 1
         if (allocated(problem%stop_weight)) wi = problem%stop_weight(i)
-        if (wi*glag(i) < -tol) local(2) = local(2) + 1
+        if (wi*glag(i) < -max(tol, m)) local(2) = local(2) + 1
       end if
     end do
     call MPI_Allreduce(local, counts, 2, MPI_INT_IP, MPI_SUM, problem%comm, ierr)
@@ -172,9 +186,10 @@ contains
   !> factor loose (while still > target),
   !> face_changes with tolerance change_tol (default 0). max_steps_trusted
   !> (optional, default max_steps): the step cap once a loose check has found
-  !> no change (then never given up).
+  !> no change (then never given up). margin (optional, default 0): the loose
+  !> checks count a row only beyond margin times the current measure of r.
   subroutine run(self, problem, free, x, g, muhat, target, per_component, max_steps, loose, change_tol, &
-                 max_steps_trusted, g_valid)
+                 max_steps_trusted, g_valid, margin)
     class(face_polish_t), intent(inout) :: self
     class(qp_problem_t), intent(inout) :: problem
     logical, intent(in) :: free(:)
@@ -188,6 +203,7 @@ contains
     !> x is on the face of `free` already (x_A = l_A, C x = 0) and g = A x - b on entry: no
     !> start correction, no product (SMALBE's polish round after a round that only released rows)
     logical, intent(in), optional :: g_valid
+    real(dp), intent(in), optional :: margin
     real(dp) :: rz, rz_new, pq, alpha, loose_at, ctol
     integer(ip) :: n, cap, unfolded
     logical :: prec, check, switched, lazy, known
@@ -200,6 +216,7 @@ contains
     loose_at = target
     ctol = 0
     if (present(change_tol)) ctol = change_tol
+    if (present(margin)) self%margin = margin
 
     known = .false.
     if (present(g_valid)) known = g_valid
@@ -325,6 +342,7 @@ contains
     self%aborted = .false.
     self%stopped_loose = .false.
     self%loose_counts = 0
+    self%margin = 0
     self%trusted = .false.
   end subroutine reset_run
 
@@ -428,7 +446,7 @@ contains
     n = problem%n
     call problem%eq%apply_t(muhat, self%w)
     self%w(1:n) = g(1:n) - self%w(1:n)
-    self%loose_counts = face_changes(problem, free, x, self%w, ctol)
+    self%loose_counts = face_changes(problem, free, x, self%w, ctol, self%margin*self%measure)
     loose_check = sum(self%loose_counts) > 0
   end function loose_check
 
