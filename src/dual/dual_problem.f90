@@ -299,11 +299,13 @@ contains
       if (.not. switch_kappa > 1) call fatal_error("dual_problem: switch_kappa must be > 1")
       self%switch_kappa = switch_kappa
       self%prec_weights = weights
-      if (self%op%dirichlet_from_factors() .or. self%op%dirichlet_by_blocks()) then
+      if (self%op%dirichlet_from_factors() .or. self%op%glued_by_faces()) then
         ! the dense local solver's factors give S_s at no set-up cost, or clusters
-        ! glued by faces and shared per class take it per block of a class at
-        ! about the set-up and application cost of 'lumped': 'dirichlet' at once
-        ! (recorded as a switch at 0 products with estimate 0; the set-up's log says so)
+        ! glued by faces: shared per class they take it per block of a class at
+        ! about the set-up and application cost of 'lumped', and without classes
+        ! (several moduli, distorted subdomains) it saves the most products:
+        ! 'dirichlet' at once (recorded as a switch at 0 products with estimate 0;
+        ! the set-up's log says so)
         call self%op%init_preconditioner(self%m_inv, 'dirichlet', weights)
         self%switch_at = 0
       else

@@ -116,10 +116,13 @@ contains
       call timer_start('preconditioner setup')
       call this%dual%set_preconditioner(kind, subdomain_weights(feti, this%op), preconditioner%preconditioner_switch)
       call timer_stop('preconditioner setup')
-      if (kind == 'auto' .and. this%dual%switch_at == 0 .and. this%op%hybrid_units()) then
+      if (kind == 'auto' .and. this%dual%switch_at == 0 .and. this%op%dirichlet_by_blocks()) then
         call log_message("preconditioner (MPRGP in the face): 'auto' -> dirichlet from the start (clusters "// &
                          'glued by faces, shared per class: one dense Schur block per subdomain of a class, '// &
                          'an application costs about what a lumped one does)')
+      else if (kind == 'auto' .and. this%dual%switch_at == 0 .and. this%op%hybrid_units()) then
+        call log_message("preconditioner (MPRGP in the face): 'auto' -> dirichlet from the start (clusters "// &
+                         'glued by faces without classes: interior solves per cluster)')
       else if (kind == 'auto' .and. this%dual%switch_at == 0) then
         ! one statement of what is used: the dense local solver's factors give S_s at no set-up cost
         call log_message("preconditioner (MPRGP in the face): 'auto' -> dirichlet from the start (S_s from "// &

@@ -139,6 +139,7 @@ module feti_operators
     procedure :: local_solver
     procedure :: dirichlet_from_factors
     procedure :: dirichlet_by_blocks
+    procedure :: glued_by_faces
     procedure :: f_shared
     procedure :: f_classes
     procedure :: f_local_operator
@@ -697,8 +698,25 @@ contains
     dirichlet_fixes_rigid_modes = this%dirichlet_holds
   end function dirichlet_fixes_rigid_modes
 
-  !> Hybrid TFETI (&mesh cluster): the FETI units are clusters of subdomains
-  !> (no Dirichlet preconditioner for them).
+  !> True when the units are clusters glued by faces (every node of a cluster
+  !> keeps one copy per subdomain), on every rank. Collective.
+  logical function glued_by_faces(this)
+    class(feti_t), intent(in) :: this
+    integer :: glued, ierr
+    integer(ip) :: ls
+    glued = merge(1, 0, this%hybrid)
+    do ls = 1, this%n_local_subs
+      if (.not. allocated(this%subs(ls)%node_copy)) then
+        glued = 0
+      else if (any(this%subs(ls)%node_copy < 1)) then
+        glued = 0
+      end if
+    end do
+    call MPI_Allreduce(MPI_IN_PLACE, glued, 1, MPI_INTEGER, MPI_MIN, this%communicator, ierr)
+    glued_by_faces = glued == 1
+  end function glued_by_faces
+
+  !> Hybrid TFETI (&mesh cluster): the FETI units are clusters of subdomains.
   logical function hybrid_units(this)
     class(feti_t), intent(in) :: this
     hybrid_units = this%hybrid
