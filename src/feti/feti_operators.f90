@@ -424,15 +424,10 @@ contains
     integer :: ready, ierr
     integer(ip) :: ls
     ready = 0
-    if (this%hybrid .and. this%f%is_shared() .and. this%n_local_subs > 0) then
+    if (this%f%is_shared() .and. this%n_local_subs > 0 .and. units_glued(this)) then
       ready = 1
       do ls = 1, this%n_local_subs
         if (this%young_rows .and. allocated(this%subs(ls)%elem_young)) ready = 0
-        if (.not. allocated(this%subs(ls)%node_copy)) then
-          ready = 0
-        else if (any(this%subs(ls)%node_copy < 1)) then
-          ready = 0
-        end if
       end do
     end if
     call MPI_Allreduce(MPI_IN_PLACE, ready, 1, MPI_INTEGER, MPI_MIN, this%communicator, ierr)
@@ -698,23 +693,30 @@ contains
     dirichlet_fixes_rigid_modes = this%dirichlet_holds
   end function dirichlet_fixes_rigid_modes
 
-  !> True when the units are clusters glued by faces (every node of a cluster
-  !> keeps one copy per subdomain), on every rank. Collective.
+  !> True when the units are clusters glued by faces, on every rank. Collective.
   logical function glued_by_faces(this)
     class(feti_t), intent(in) :: this
     integer :: glued, ierr
-    integer(ip) :: ls
-    glued = merge(1, 0, this%hybrid)
-    do ls = 1, this%n_local_subs
-      if (.not. allocated(this%subs(ls)%node_copy)) then
-        glued = 0
-      else if (any(this%subs(ls)%node_copy < 1)) then
-        glued = 0
-      end if
-    end do
+    glued = merge(1, 0, units_glued(this))
     call MPI_Allreduce(MPI_IN_PLACE, glued, 1, MPI_INTEGER, MPI_MIN, this%communicator, ierr)
     glued_by_faces = glued == 1
   end function glued_by_faces
+
+  !> This rank's units are clusters glued by faces: every node of a cluster
+  !> keeps one copy per subdomain.
+  logical function units_glued(this)
+    class(feti_t), intent(in) :: this
+    integer(ip) :: ls
+    units_glued = this%hybrid
+    do ls = 1, this%n_local_subs
+      if (.not. units_glued) return
+      if (.not. allocated(this%subs(ls)%node_copy)) then
+        units_glued = .false.
+      else
+        units_glued = all(this%subs(ls)%node_copy >= 1)
+      end if
+    end do
+  end function units_glued
 
   !> Hybrid TFETI (&mesh cluster): the FETI units are clusters of subdomains.
   logical function hybrid_units(this)
